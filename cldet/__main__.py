@@ -1,0 +1,5 @@
+"""Allow ``python -m cldet``."""
+
+from cldet.cli import main
+
+main()

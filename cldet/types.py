@@ -1,0 +1,74 @@
+"""Plain data passed between layers: frozen dataclasses, times in integer ns, lengths in metres."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.floating]
+
+
+@dataclass(frozen=True)
+class Cloud:
+    """One point cloud (a LiDAR or radar frame) at one instant."""
+
+    stamp_ns: int
+    points: NDArray[np.float32]  # (N, 3) x, y, z metres in the sensor's frame; valid rows only
+
+
+@dataclass(frozen=True)
+class PositionSample:
+    """A 3D position at one instant (ground truth, a reference estimate)."""
+
+    stamp_ns: int
+    position: NDArray[np.float64]  # (3,) x, y, z metres, Mid-360 frame
+
+
+@dataclass(frozen=True)
+class ClassSample:
+    """The drone type label at one instant (0..3, constant within a sequence)."""
+
+    stamp_ns: int
+    class_id: int
+
+
+@dataclass(frozen=True)
+class ImageFrame:
+    """One camera image as the PNG bytes found on disk (never decoded)."""
+
+    stamp_ns: int
+    png: bytes
+
+
+class Source(IntEnum):
+    """Where an estimate comes from."""
+
+    DETECTED = 1  # a cluster was associated with the track in this frame
+    PREDICTED = 2  # no detection: the track's motion model predicted it
+    SMOOTHED = 3  # filled or refined by the forward-backward smoother
+    FALLBACK = 4  # no track at all: a fallback rule (cl-det's history / training mean)
+
+
+@dataclass(frozen=True)
+class Cluster:
+    """One cluster of foreground points in one frame."""
+
+    cluster_id: int  # index within the frame, 0..K-1
+    centroid: NDArray[np.float64]  # (3,) metres
+    lower: NDArray[np.float64]  # (3,) axis-aligned box min, metres
+    upper: NDArray[np.float64]  # (3,) axis-aligned box max, metres
+    n_points: int
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The drone's estimated position at one instant."""
+
+    stamp_ns: int
+    position: NDArray[np.float64]  # (3,) metres, Mid-360 frame
+    source: Source
+    n_points: int  # points in the associated cluster (0 when not detected)
+    sigma_m: float  # 1-sigma position uncertainty, metres
