@@ -20,6 +20,16 @@ class Cloud:
 
 
 @dataclass(frozen=True)
+class LidarFrame:
+    """One Mid-360 scan with the Avia scan paired to it (both already in the Mid-360 frame)."""
+
+    stamp_ns: int  # the Mid-360 stamp; estimates are made at this instant
+    mid360: NDArray[np.float32]  # (N, 3) valid points, metres
+    avia: NDArray[np.float32]  # (M, 3) valid points, metres; (0, 3) when no Avia frame is paired
+    avia_stamp_ns: int | None = None  # stamp of the paired Avia frame, None when there is none
+
+
+@dataclass(frozen=True)
 class PositionSample:
     """A 3D position at one instant (ground truth, a reference estimate)."""
 

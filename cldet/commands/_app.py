@@ -1,0 +1,59 @@
+"""The Typer application shared by every command module, and the error mapping they all use."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Annotated, TypeVar
+
+import typer
+
+from cldet import __version__
+from cldet.errors import CldetError
+
+app = typer.Typer(
+    name="cldet",
+    help=(
+        "Drone detection from LiDAR for the MMAUD anti-UAV challenge.\n\n"
+        "Typical flow: `cldet simulate data` (or use the real dataset) -> `cldet convert data -o logs` "
+        "-> `cldet annotate logs/val/*.mcap` -> `cldet export` -> `cldet evaluate`. "
+        "`cldet demo` runs it all on a small generated dataset."
+    ),
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+T = TypeVar("T")
+
+
+def echo_err(message: str) -> None:
+    typer.echo(message, err=True)
+
+
+@contextmanager
+def handled() -> Iterator[None]:
+    """Map cldet's own errors to ``ERROR: ...`` and exit code 1; Ctrl-C to exit code 130."""
+    try:
+        yield
+    except CldetError as err:
+        echo_err(f"ERROR: {err}")
+        raise typer.Exit(1) from err
+    except KeyboardInterrupt as err:
+        echo_err("interrupted")
+        raise typer.Exit(130) from err
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"cldet {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version.")
+    ] = False,
+) -> None:
+    """Drone detection from LiDAR for the MMAUD anti-UAV challenge."""

@@ -1,0 +1,1 @@
+"""``cldet annotate``: not yet implemented."""

@@ -1,0 +1,1 @@
+"""``cldet convert``: not yet implemented."""

@@ -1,0 +1,1 @@
+"""``cldet demo``: not yet implemented."""

@@ -1,0 +1,1 @@
+"""``cldet results``: not yet implemented."""
