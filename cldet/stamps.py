@@ -6,7 +6,8 @@ import re
 
 from cldet.errors import DatasetError
 
-_STAMP_RE = re.compile(r"^(\d{1,12})\.(\d{1,6})$")
+# ASCII digits only, whole string (``$`` would also accept a trailing newline).
+_STAMP_RE = re.compile(r"(\d{1,12})\.(\d{1,6})", re.ASCII)
 
 NS_PER_S = 1_000_000_000
 
@@ -26,7 +27,7 @@ def parse_stamp(text: str) -> int:
     Raises:
         DatasetError: ``text`` is not of the form ``<seconds>.<1-6 digits>``.
     """
-    match = _STAMP_RE.match(text)
+    match = _STAMP_RE.fullmatch(text)
     if match is None:
         raise DatasetError(
             f"{text!r} is not a timestamp: expected Unix seconds with 1-6 decimals, "
