@@ -1,0 +1,291 @@
+"""``annotate``: read a log's LiDAR channels, run the estimator, write results back, record a review.
+
+The flow for one log (times are integer ns throughout):
+
+1. pass 1 streams the paired Mid-360/Avia frames into the estimator's background model;
+2. pass 2 streams them again through the per-frame verb (``process``), feeding the review view;
+3. ``finish`` associates, selects and smooths the drone's track over the whole sequence;
+4. the log is rewritten with the ``/cldet/*`` result channels (every source message copied byte
+   for byte, earlier results replaced), atomically, and the ``.rrd`` renamed into place.
+
+Nothing holds more than one frame's raw points; what is kept per frame is the small foreground.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cldet import __version__
+from cldet.config import CldetConfig, config_to_dict
+from cldet.core.estimator import FrameDetections, SequenceEstimate, make_estimator
+from cldet.core.frames import pair_frames
+from cldet.errors import CldetError, LogError
+from cldet.io import topics
+from cldet.io.mcap_read import iter_clouds, iter_positions, list_topics, read_metadata
+from cldet.io.mcap_write import LogWriter
+from cldet.io.rewrite import Addition, rewrite_log
+from cldet.progress import NullProgress, Progress
+from cldet.types import Cloud, Estimate, LidarFrame, Source
+from cldet.view import NullView, RerunView, View
+
+METADATA_ANNOTATE = topics.METADATA_CONFIG
+
+
+@dataclass(frozen=True)
+class AnnotateReport:
+    """The outcome of annotating one log."""
+
+    log: Path
+    output: Path
+    rrd: Path | None
+    sequence: str
+    frames: int
+    sources: dict[str, int]  # estimates per source name
+    seconds: float
+    rms_error_m: float | None  # against the log's ground truth, when it has one
+
+    @property
+    def predictions_per_s(self) -> float:
+        """Estimates produced per second of wall time, end to end."""
+        return self.frames / self.seconds if self.seconds > 0 else float("inf")
+
+    def describe(self) -> str:
+        """One line for the terminal."""
+        parts = [f"{self.sequence}: {self.frames} frames in {self.seconds:.1f} s ({self.predictions_per_s:.0f}/s)"]
+        parts.append(", ".join(f"{n} {k}" for k, n in self.sources.items() if n))
+        if self.rms_error_m is not None:
+            parts.append(f"RMS error {self.rms_error_m:.3f} m vs ground truth")
+        parts.append(f"-> {self.output}")
+        if self.rrd is not None:
+            parts.append(f"review: rerun {self.rrd}")
+        return "; ".join(parts)
+
+
+def _frames(log: Path, has_avia: bool) -> Iterator[LidarFrame]:
+    avia: Iterator[Cloud] = iter_clouds(log, topics.LIVOX_AVIA) if has_avia else iter(())
+    return pair_frames(iter_clouds(log, topics.LIDAR_360), avia)
+
+
+def annotate_log(
+    log: Path,
+    *,
+    config: CldetConfig | None = None,
+    output: Path | None = None,
+    rrd: Path | None = None,
+    write_rrd: bool = True,
+    progress: Progress | None = None,
+) -> AnnotateReport:
+    """Estimate the drone's position at every Mid-360 frame of ``log`` and write the results back.
+
+    Args:
+        log: an MCAP log written by ``cldet convert`` (needs ``/lidar_360``; uses ``/livox_avia``
+            and ``/ground_truth`` when present). Never damaged: results go to a temporary file
+            renamed over ``output`` only when complete.
+        config: the estimator configuration (defaults when None).
+        output: where the annotated log goes; default ``log`` itself (rewritten in place).
+        rrd: the Rerun review recording; default ``output`` with suffix ``.rrd``.
+        write_rrd: False skips the recording.
+        progress: receives one unit per frame of each pass.
+
+    Returns:
+        An :class:`AnnotateReport`.
+
+    Raises:
+        LogError: the log cannot be read or has no ``/lidar_360`` channel.
+    """
+    started = time.perf_counter()
+    config = config or CldetConfig()
+    progress = progress or NullProgress()
+    log = Path(log)
+    output = Path(output) if output is not None else log
+    found = list_topics(log)
+    if topics.LIDAR_360 not in found:
+        raise LogError(
+            f"{log}: no {topics.LIDAR_360} channel to annotate; topics in the log: "
+            + (", ".join(sorted(found)) or "none")
+        )
+    n_frames = found[topics.LIDAR_360]
+    has_avia = found.get(topics.LIVOX_AVIA, 0) > 0
+    source_meta = read_metadata(log).get(topics.METADATA_SOURCE, {})
+    sequence = source_meta.get("sequence", log.stem)
+
+    view: View = NullView()
+    rrd_path: Path | None = None
+    if write_rrd:
+        rrd_path = Path(rrd) if rrd is not None else output.with_suffix(".rrd")
+        view = RerunView(rrd_path, recording_name=f"cldet {sequence}")
+    try:
+        estimator = make_estimator(config)
+        progress.start(2 * n_frames, f"{sequence}: background")
+        for frame in _frames(log, has_avia):
+            estimator.observe(frame)
+            progress.advance()
+        progress.start(2 * n_frames, f"{sequence}: tracking")
+        detections: list[FrameDetections] = []
+        for frame in _frames(log, has_avia):
+            found_here = estimator.process(frame)
+            detections.append(found_here)
+            view.log_frame(frame, found_here)
+            progress.advance()
+        result = estimator.finish()
+        view.log_result(result, detections)
+        truth = list(iter_positions(log, topics.GROUND_TRUTH)) if found.get(topics.GROUND_TRUTH) else []
+        rms = None
+        if truth:
+            truth_ns = np.array([t.stamp_ns for t in truth], dtype=np.int64)
+            truth_xyz = np.array([t.position for t in truth], dtype=np.float64)
+            view.log_truth(truth_ns, truth_xyz)
+            rms = _rms_error(result.estimates, truth_ns, truth_xyz)
+        metadata = {
+            METADATA_ANNOTATE: {
+                "method": config.method,
+                "config": json.dumps(config_to_dict(config), sort_keys=True),
+                "cldet_version": __version__,
+                "sequence": sequence,
+                "frames": str(len(detections)),
+            }
+        }
+        rewrite_log(
+            log,
+            output,
+            result_additions(result, detections),
+            metadata=metadata,
+            replace_metadata=(METADATA_ANNOTATE,),
+        )
+        rrd_written = view.close()
+    except BaseException:
+        view.abort()
+        raise
+    sources = {s.name.lower(): 0 for s in Source}
+    for estimate in result.estimates:
+        sources[estimate.source.name.lower()] += 1
+    return AnnotateReport(
+        log=log,
+        output=output,
+        rrd=rrd_written,
+        sequence=sequence,
+        frames=len(detections),
+        sources=sources,
+        seconds=time.perf_counter() - started,
+        rms_error_m=rms,
+    )
+
+
+def _rms_error(
+    estimates: Sequence[Estimate], truth_ns: np.ndarray, truth_xyz: np.ndarray
+) -> float | None:
+    from cldet.core.trajectory import evaluate_trajectory
+
+    if not estimates:
+        return None
+    stamps = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
+    positions = np.array([e.position for e in estimates], dtype=np.float64)
+    errors = np.linalg.norm(evaluate_trajectory(stamps, positions, truth_ns) - truth_xyz, axis=1)
+    return float(np.sqrt(np.mean(errors**2)))
+
+
+def result_additions(
+    result: SequenceEstimate, detections: Sequence[FrameDetections]
+) -> list[tuple[int, Addition]]:
+    """The ``/cldet/*`` messages of one annotate run, as ``(log_time_ns, write)`` pairs.
+
+    - ``/cldet/estimate`` (cldet.Estimate) and ``/cldet/pose`` (foxglove.PoseInFrame) per estimate;
+    - ``/cldet/trajectory`` (foxglove.PosesInFrame): the whole smoothed trajectory, once, at the
+      first frame's stamp, so a viewer shows it for the whole playback;
+    - ``/cldet/clusters`` (foxglove.SceneUpdate) per frame: a box and label per cluster, the
+      chosen one as a separate green ``drone`` entity;
+    - ``/cldet/foreground`` (foxglove.PointCloud x, y, z, cluster_id) per frame.
+    """
+    frame_id = topics.FRAME_MID360
+    additions: list[tuple[int, Addition]] = []
+    for est in result.estimates:
+        additions.append((est.stamp_ns, _estimate_writer(est)))
+    if result.estimates:
+        first = result.estimates[0].stamp_ns
+        positions = np.array([e.position for e in result.estimates], dtype=np.float64)
+        additions.append(
+            (first, lambda w: w.write_poses(topics.TRAJECTORY, first, positions, frame_id))
+        )
+    for det in detections:
+        chosen_id = result.chosen.get(det.stamp_ns)
+        additions.append((det.stamp_ns, _clusters_writer(det, chosen_id)))
+    return additions
+
+
+def _estimate_writer(est: Estimate) -> Addition:
+    def write(writer: LogWriter) -> None:
+        writer.write_estimate(topics.ESTIMATE, est.stamp_ns, est)
+        writer.write_pose(topics.ESTIMATE_POSE, est.stamp_ns, est.position, topics.FRAME_MID360)
+
+    return write
+
+
+def _clusters_writer(det: FrameDetections, chosen_id: int | None) -> Addition:
+    def write(writer: LogWriter) -> None:
+        cloud = np.column_stack([det.foreground, det.labels.astype(np.float32)])
+        writer.write_cloud(
+            topics.FOREGROUND, det.stamp_ns, cloud, topics.FRAME_MID360, fields=("x", "y", "z", "cluster_id")
+        )
+        others = [c for c in det.clusters if c.cluster_id != chosen_id]
+        writer.write_scene_update(topics.CLUSTERS, det.stamp_ns, others, topics.FRAME_MID360)
+        chosen = [c for c in det.clusters if c.cluster_id == chosen_id]
+        writer.write_scene_update(
+            topics.CLUSTERS,
+            det.stamp_ns,
+            chosen,
+            topics.FRAME_MID360,
+            labels=[f"drone ({c.n_points} pts)" for c in chosen],
+            color=(0.1, 0.9, 0.2, 0.8),
+            entity_id="drone",
+        )
+
+    return write
+
+
+def annotate_logs(
+    logs: Sequence[Path],
+    *,
+    config: CldetConfig | None = None,
+    output: Path | None = None,
+    write_rrd: bool = True,
+    workers: int = 1,
+    progress: Progress | None = None,
+) -> tuple[list[AnnotateReport], list[tuple[Path, str]]]:
+    """Annotate several logs, in parallel processes when ``workers > 1``.
+
+    One failing log is reported and the others still run. ``output`` is allowed with a single log.
+
+    Returns:
+        (reports of the logs done, (log, error message) of those that failed).
+    """
+    if output is not None and len(logs) != 1:
+        raise CldetError(f"an output path goes with exactly one log, got {len(logs)} logs")
+    progress = progress or NullProgress()
+    reports: list[AnnotateReport] = []
+    failures: list[tuple[Path, str]] = []
+    progress.start(len(logs), "annotating")
+    if workers <= 1 or len(logs) == 1:
+        for log in logs:
+            try:
+                reports.append(annotate_log(log, config=config, output=output, write_rrd=write_rrd))
+            except CldetError as err:
+                failures.append((log, str(err)))
+            progress.advance()
+        return reports, failures
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        futures = {pool.submit(annotate_log, log, config=config, write_rrd=write_rrd): log for log in logs}
+        for future in as_completed(futures):
+            try:
+                reports.append(future.result())
+            except CldetError as err:
+                failures.append((futures[future], str(err)))
+            progress.advance()
+    reports.sort(key=lambda r: str(r.log))
+    return reports, failures
