@@ -1,0 +1,420 @@
+"""Reading cldet's MCAP logs back into plain data (``Cloud``, ``PositionSample``, ...).
+
+``open_log(path)`` gives a :class:`LogReader` (a context manager) for several reads of one file;
+the module-level ``iter_*``/``read_*``/``list_topics`` functions open, read and close in one
+call. Every stamp is integer nanoseconds since the Unix epoch: the message's log time.
+
+Point clouds are decoded without copying: the points are a read-only float32 view into the
+message bytes. Every failure is a :class:`~cldet.errors.LogError` naming the file (and the topic,
+listing the topics that exist when one is missing).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from types import TracebackType
+from typing import IO, Any
+
+import numpy as np
+from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
+from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+from mcap.reader import SeekingReader, make_reader
+from mcap.records import Channel, Message, Schema
+from mcap.summary import Summary
+from numpy.typing import NDArray
+
+from cldet.errors import LogError
+from cldet.io import topics
+from cldet.io.schemas import ClassLabel
+from cldet.io.schemas import Estimate as EstimateMessage
+from cldet.types import ClassSample, Cloud, Estimate, PositionSample, Source
+
+__all__ = [
+    "LogReader",
+    "decode_cloud",
+    "iter_classes",
+    "iter_cloud_fields",
+    "iter_clouds",
+    "iter_estimates",
+    "iter_positions",
+    "list_topics",
+    "open_log",
+    "read_metadata",
+]
+
+_DATA_FIELD = 6  # foxglove.PointCloud.data
+_FLOAT32 = PackedElementField.FLOAT32
+
+
+def _read_varint(buf: bytes, pos: int) -> tuple[int, int]:
+    result = shift = 0
+    while True:
+        byte = buf[pos]
+        pos += 1
+        result |= (byte & 0x7F) << shift
+        if byte < 0x80:
+            return result, pos
+        shift += 7
+
+
+def _split_data_field(buf: bytes) -> tuple[bytes, int, int]:
+    """Split a serialized PointCloud into (everything but ``data``, data offset, data length).
+
+    Walks the top-level protobuf fields only (a handful), so the points are never copied.
+    """
+    pos, n = 0, len(buf)
+    data_start = data_len = 0
+    header = bytearray()
+    while pos < n:
+        start = pos
+        key, pos = _read_varint(buf, pos)
+        wire = key & 7
+        if wire == 0:
+            _, pos = _read_varint(buf, pos)
+        elif wire == 1:
+            pos += 8
+        elif wire == 5:
+            pos += 4
+        elif wire == 2:
+            length, pos = _read_varint(buf, pos)
+            if key >> 3 == _DATA_FIELD:
+                data_start, data_len = pos, length
+                pos += length
+                continue
+            pos += length
+        else:
+            raise ValueError(f"unsupported protobuf wire type {wire}")
+        header += buf[start:pos]
+    if pos != n:
+        raise ValueError("truncated PointCloud message")
+    return bytes(header), data_start, data_len
+
+
+def decode_cloud(data: bytes) -> tuple[int, dict[str, NDArray[np.float32]]]:
+    """Decode a serialized ``foxglove.PointCloud`` into its stamp and one column per field.
+
+    Returns:
+        ``(stamp_ns, {name: (N,) float32})`` from the message's own ``timestamp``; the columns
+        are read-only views into ``data`` (no copy).
+
+    Raises:
+        ValueError: the message is malformed or has a field that is not FLOAT32.
+    """
+    header_bytes, start, length = _split_data_field(data)
+    header = PointCloud.FromString(header_bytes)
+    stride = header.point_stride
+    if stride <= 0 or length % stride:
+        raise ValueError(f"point_stride {stride} does not divide the {length} data bytes")
+    n = length // stride
+    names: list[str] = []
+    offsets: list[int] = []
+    for field in header.fields:
+        if field.type != _FLOAT32:
+            raise ValueError(f"field {field.name!r} is not FLOAT32")
+        names.append(field.name)
+        offsets.append(field.offset)
+    dtype = np.dtype(
+        {"names": names, "formats": ["<f4"] * len(names), "offsets": offsets, "itemsize": stride}
+    )
+    records = np.frombuffer(data, dtype=dtype, count=n, offset=start)
+    stamp_ns = header.timestamp.seconds * 1_000_000_000 + header.timestamp.nanos
+    return stamp_ns, {name: records[name] for name in names}
+
+
+def _xyz_view(data: bytes) -> NDArray[np.float32]:
+    """The (N, 3) x, y, z of a serialized PointCloud, a view when x, y, z are packed first."""
+    header_bytes, start, length = _split_data_field(data)
+    header = PointCloud.FromString(header_bytes)
+    stride = header.point_stride
+    layout = {f.name: (f.offset, f.type) for f in header.fields}
+    if any(layout.get(c, (None, None))[1] != _FLOAT32 for c in "xyz"):
+        raise ValueError("x, y, z are not all FLOAT32 fields")
+    if stride <= 0 or length % stride:
+        raise ValueError(f"point_stride {stride} does not divide the {length} data bytes")
+    n = length // stride
+    if layout["x"][0] == 0 and layout["y"][0] == 4 and layout["z"][0] == 8 and stride % 4 == 0:
+        flat = np.frombuffer(data, dtype="<f4", count=n * stride // 4, offset=start)
+        return flat.reshape(n, stride // 4)[:, :3]
+    _, columns = decode_cloud(data)
+    return np.stack([columns["x"], columns["y"], columns["z"]], axis=1)
+
+
+class LogReader:
+    """An open MCAP log: topics, metadata and typed iterators over its channels.
+
+    Open with :func:`open_log`; use as a context manager (or call :meth:`close`).
+
+    Raises:
+        LogError: the file is missing, not MCAP, truncated or corrupt.
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        try:
+            self._file: IO[bytes] = open(self.path, "rb")  # noqa: SIM115 - closed in close()
+        except OSError as err:
+            raise LogError(f"cannot open MCAP log {self.path}: {err.strerror or err}") from err
+        try:
+            reader = make_reader(self._file, validate_crcs=True)  # catches corrupt chunks
+            summary = reader.get_summary()
+        except Exception as err:
+            self._file.close()
+            raise LogError(
+                f"{self.path} is not a readable MCAP log (truncated or corrupt?): {err}"
+            ) from err
+        if summary is None or not isinstance(reader, SeekingReader):
+            self._file.close()
+            raise LogError(
+                f"{self.path} has no summary section: truncated, or not finished by its writer"
+            )
+        self._reader = reader
+        self._summary: Summary = summary
+
+    def __enter__(self) -> LogReader:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the file."""
+        self._file.close()
+
+    # --- what is in the log ------------------------------------------------------------------
+    def list_topics(self) -> dict[str, int]:
+        """Message count per topic (topics in channel order)."""
+        counts: dict[int, int] = {}
+        if self._summary.statistics is not None:
+            counts = dict(self._summary.statistics.channel_message_counts)
+        out: dict[str, int] = {}
+        for channel_id, channel in self._summary.channels.items():
+            out[channel.topic] = out.get(channel.topic, 0) + counts.get(channel_id, 0)
+        return out
+
+    def schema_name(self, topic: str) -> str:
+        """The schema name of ``topic`` (e.g. ``foxglove.PointCloud``).
+
+        Raises:
+            LogError: the topic is not in the log (the message lists those that are).
+        """
+        for channel in self._summary.channels.values():
+            if channel.topic == topic:
+                schema = self._summary.schemas.get(channel.schema_id)
+                return schema.name if schema is not None else ""
+        raise self._missing(topic)
+
+    def time_range(self) -> tuple[int, int]:
+        """First and last message log times, integer ns (0, 0 for an empty log)."""
+        stats = self._summary.statistics
+        if stats is None or stats.message_count == 0:
+            return 0, 0
+        return stats.message_start_time, stats.message_end_time
+
+    def metadata(self) -> dict[str, dict[str, str]]:
+        """Every metadata record, by name (a later record of the same name wins)."""
+        try:
+            return {m.name: dict(m.metadata) for m in self._reader.iter_metadata()}
+        except Exception as err:
+            raise LogError(f"cannot read metadata of {self.path} (corrupt?): {err}") from err
+
+    def _missing(self, topic: str) -> LogError:
+        existing = self.list_topics()
+        listing = ", ".join(f"{t} ({n})" for t, n in existing.items()) or "none"
+        return LogError(f"{self.path} has no topic {topic}; topics in the file: {listing}")
+
+    def _require(self, topic: str, schemas: Iterable[str]) -> None:
+        wanted = tuple(schemas)
+        name = self.schema_name(topic)
+        if name not in wanted:
+            raise LogError(
+                f"{self.path}: topic {topic} carries {name or 'schemaless messages'}, "
+                f"expected {' or '.join(wanted)}"
+            )
+
+    # --- messages ----------------------------------------------------------------------------
+    def iter_messages(
+        self,
+        topic_names: Iterable[str] | None = None,
+        *,
+        start_ns: int | None = None,
+        end_ns: int | None = None,
+    ) -> Iterator[tuple[Schema | None, Channel, Message]]:
+        """Raw messages in log-time order, optionally of some topics within ``[start_ns, end_ns)``.
+
+        Raises:
+            LogError: a chunk cannot be read (corrupt or truncated file).
+        """
+        wanted = None if topic_names is None else list(topic_names)
+        try:
+            yield from self._reader.iter_messages(
+                topics=wanted, starting_at=start_ns, ending_before=end_ns
+            )
+        except LogError:
+            raise
+        except Exception as err:
+            what = f"topics {', '.join(wanted)}" if wanted else "messages"
+            raise LogError(f"cannot read {what} from {self.path} (corrupt?): {err}") from err
+
+    def _decoded(
+        self, topic: str, schemas: tuple[str, ...], start_ns: int | None, end_ns: int | None
+    ) -> Iterator[tuple[Message, Any]]:
+        """(raw message, decoded payload) pairs; decoding errors become LogError."""
+        self._require(topic, schemas)
+        for schema, _channel, message in self.iter_messages(
+            [topic], start_ns=start_ns, end_ns=end_ns
+        ):
+            yield message, schema.name if schema is not None else ""
+
+    def iter_clouds(
+        self, topic: str, *, start_ns: int | None = None, end_ns: int | None = None
+    ) -> Iterator[Cloud]:
+        """The clouds of a ``foxglove.PointCloud`` topic: (N, 3) float32 read-only views.
+
+        Raises:
+            LogError: the topic is missing, is not a point cloud topic, or a message is corrupt.
+        """
+        for message, _ in self._decoded(topic, (topics.SCHEMA_POINT_CLOUD,), start_ns, end_ns):
+            try:
+                points = _xyz_view(message.data)
+            except (ValueError, IndexError) as err:
+                raise self._bad(topic, message, err) from err
+            yield Cloud(stamp_ns=message.log_time, points=points)
+
+    def iter_cloud_fields(
+        self, topic: str, *, start_ns: int | None = None, end_ns: int | None = None
+    ) -> Iterator[tuple[int, dict[str, NDArray[np.float32]]]]:
+        """``(stamp_ns, {field: (N,) float32})`` per cloud, extra fields (``cluster_id``) included."""
+        for message, _ in self._decoded(topic, (topics.SCHEMA_POINT_CLOUD,), start_ns, end_ns):
+            try:
+                _, columns = decode_cloud(message.data)
+            except (ValueError, IndexError) as err:
+                raise self._bad(topic, message, err) from err
+            yield message.log_time, columns
+
+    def iter_positions(
+        self, topic: str, *, start_ns: int | None = None, end_ns: int | None = None
+    ) -> Iterator[PositionSample]:
+        """Positions of a ``foxglove.PoseInFrame`` or ``cldet.Estimate`` topic, (3,) float64."""
+        allowed = (topics.SCHEMA_POSE_IN_FRAME, topics.SCHEMA_ESTIMATE)
+        for message, schema in self._decoded(topic, allowed, start_ns, end_ns):
+            try:
+                if schema == topics.SCHEMA_ESTIMATE:
+                    est = EstimateMessage.FromString(message.data)
+                    xyz = (est.x, est.y, est.z)
+                else:
+                    p = PoseInFrame.FromString(message.data).pose.position
+                    xyz = (p.x, p.y, p.z)
+            except Exception as err:
+                raise self._bad(topic, message, err) from err
+            yield PositionSample(stamp_ns=message.log_time, position=np.array(xyz, np.float64))
+
+    def iter_classes(
+        self, topic: str = topics.CLASS, *, start_ns: int | None = None, end_ns: int | None = None
+    ) -> Iterator[ClassSample]:
+        """Labels of a ``cldet.ClassLabel`` topic."""
+        for message, _ in self._decoded(topic, (topics.SCHEMA_CLASS_LABEL,), start_ns, end_ns):
+            try:
+                label = ClassLabel.FromString(message.data)
+            except Exception as err:
+                raise self._bad(topic, message, err) from err
+            yield ClassSample(stamp_ns=message.log_time, class_id=int(label.class_id))
+
+    def iter_estimates(
+        self,
+        topic: str = topics.ESTIMATE,
+        *,
+        start_ns: int | None = None,
+        end_ns: int | None = None,
+    ) -> Iterator[tuple[Estimate, int]]:
+        """``(estimate, track_id)`` pairs of a ``cldet.Estimate`` topic."""
+        for message, _ in self._decoded(topic, (topics.SCHEMA_ESTIMATE,), start_ns, end_ns):
+            try:
+                est = EstimateMessage.FromString(message.data)
+                source = Source(est.source)
+            except Exception as err:
+                raise self._bad(topic, message, err) from err
+            yield (
+                Estimate(
+                    stamp_ns=message.log_time,
+                    position=np.array((est.x, est.y, est.z), np.float64),
+                    source=source,
+                    n_points=int(est.n_points),
+                    sigma_m=float(est.sigma_m),
+                ),
+                int(est.track_id),
+            )
+
+    def _bad(self, topic: str, message: Message, err: Exception) -> LogError:
+        return LogError(
+            f"{self.path}: cannot decode the message on {topic} at {message.log_time} ns: {err}"
+        )
+
+
+def open_log(path: str | os.PathLike[str]) -> LogReader:
+    """Open an MCAP log for reading (use as a context manager).
+
+    Raises:
+        LogError: the file is missing, not MCAP, truncated or corrupt.
+    """
+    return LogReader(path)
+
+
+def iter_clouds(
+    path: str | os.PathLike[str],
+    topic: str,
+    *,
+    start_ns: int | None = None,
+    end_ns: int | None = None,
+) -> Iterator[Cloud]:
+    """The clouds of one point-cloud topic of the log at ``path``, in time order (see
+    :meth:`LogReader.iter_clouds`)."""
+    with open_log(path) as log:
+        yield from log.iter_clouds(topic, start_ns=start_ns, end_ns=end_ns)
+
+
+def iter_cloud_fields(
+    path: str | os.PathLike[str], topic: str
+) -> Iterator[tuple[int, dict[str, NDArray[np.float32]]]]:
+    """``(stamp_ns, columns)`` per cloud of one topic (see :meth:`LogReader.iter_cloud_fields`)."""
+    with open_log(path) as log:
+        yield from log.iter_cloud_fields(topic)
+
+
+def iter_positions(path: str | os.PathLike[str], topic: str) -> Iterator[PositionSample]:
+    """The positions of one pose or estimate topic (see :meth:`LogReader.iter_positions`)."""
+    with open_log(path) as log:
+        yield from log.iter_positions(topic)
+
+
+def iter_classes(path: str | os.PathLike[str], topic: str = topics.CLASS) -> Iterator[ClassSample]:
+    """The class labels of one ``cldet.ClassLabel`` topic."""
+    with open_log(path) as log:
+        yield from log.iter_classes(topic)
+
+
+def iter_estimates(
+    path: str | os.PathLike[str], topic: str = topics.ESTIMATE
+) -> Iterator[tuple[Estimate, int]]:
+    """``(estimate, track_id)`` pairs of one ``cldet.Estimate`` topic."""
+    with open_log(path) as log:
+        yield from log.iter_estimates(topic)
+
+
+def read_metadata(path: str | os.PathLike[str]) -> dict[str, dict[str, str]]:
+    """Every metadata record of the log at ``path``, by name."""
+    with open_log(path) as log:
+        return log.metadata()
+
+
+def list_topics(path: str | os.PathLike[str]) -> dict[str, int]:
+    """Message count per topic of the log at ``path``."""
+    with open_log(path) as log:
+        return log.list_topics()
