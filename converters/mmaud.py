@@ -301,7 +301,9 @@ def list_stamped_files(folder: Path, suffix: str = ".npy") -> list[tuple[int, Pa
 def _load_array(path: Path) -> NDArray[Any]:
     """``np.load`` one ``.npy`` file (no pickles), every failure turned into a DatasetError."""
     try:
-        loaded = np.load(path, allow_pickle=False)
+        # Our own handle: np.load leaks its file when a "PK" (zip) prefix turns out corrupt.
+        with open(path, "rb") as stream:
+            loaded = np.load(stream, allow_pickle=False)
     except OSError as err:
         raise DatasetError(f"cannot read {path}: {err}") from err
     except Exception as err:  # numpy raises ValueError, EOFError, BadZipFile, TokenError, ...
@@ -366,7 +368,8 @@ def load_cloud(path: Path) -> NDArray[np.float32]:
     valid = array[:, 0] != 0
     valid |= array[:, 1] != 0
     valid |= array[:, 2] != 0
-    points = array.take(np.flatnonzero(valid), axis=0).astype(np.float32, copy=False)
+    with np.errstate(over="ignore"):  # beyond float32 range -> inf, reported just below
+        points = array.take(np.flatnonzero(valid), axis=0).astype(np.float32, copy=False)
     _check_finite(points, array, path)
     return np.ascontiguousarray(points)
 

@@ -85,7 +85,9 @@ def test_known_stamps() -> None:
     ],
 )
 def test_bad_strings_are_rejected(bad: str) -> None:
-    with pytest.raises(DatasetError, match="is not a timestamp: expected Unix seconds with 1-6 decimals"):
+    with pytest.raises(
+        DatasetError, match="is not a timestamp: expected Unix seconds with 1-6 decimals"
+    ):
         parse_stamp(bad)
 
 
