@@ -1,0 +1,280 @@
+"""Export a challenge submission (``mmaud_results.csv``) from annotated MCAP logs.
+
+Each log names its sequence in its ``cldet.source`` metadata and carries the estimator's
+trajectory on ``/cldet/estimate`` (``cldet.Estimate``). For every query row the sequence's
+trajectory is evaluated at the row's stamp by
+:func:`cldet.core.trajectory.evaluate_trajectory`: linear interpolation between estimates, the
+track's own constant-velocity motion before the first and after the last one.
+
+Rules, all reported in the returned :class:`ExportReport`:
+
+- Estimates whose source is ``FALLBACK`` (a fallback rule, not the track) are ignored when the
+  log also has estimates from the track; the track's motion then bridges those stretches.
+- A query sequence with no log, or whose log has no usable estimate, gets the global constant
+  :data:`FALLBACK_POSITION_M` (the training-set mean position) on every row, and a warning.
+- ``Classification`` is the constant :data:`DEFAULT_CLASS_ID` (no classifier yet) unless a
+  class id is given.
+- Without a query file, the rows are each log's ``/ground_truth`` stamps (to score a split that
+  has ground truth); logs without ground truth are skipped with a warning.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cldet.core.trajectory import evaluate_trajectory
+from cldet.errors import LogError, OutputExistsError, ResultsError
+from cldet.io import topics
+from cldet.io.mcap_read import LogReader, open_log
+from cldet.results import (
+    QueryRow,
+    ResultRow,
+    TruthRow,
+    normalise_sequence,
+    read_timestamps,
+    write_results,
+)
+from cldet.stamps import format_stamp
+from cldet.types import Source
+
+FALLBACK_POSITION_M: Final[tuple[float, float, float]] = (0.734, -9.739, 33.353)
+"""Position (metres, Mid-360 frame) for a sequence without any estimate: the training-set mean."""
+DEFAULT_CLASS_ID: Final = 0
+"""Classification written for every row until a classifier exists."""
+
+
+@dataclass(frozen=True)
+class LogTrack:
+    """The estimated trajectory of one annotated log."""
+
+    path: Path
+    sequence: str  # as in the log's cldet.source metadata
+    split: str  # "" when the metadata does not say
+    stamps_ns: NDArray[np.int64]  # (K,) ascending; K = 0 when the log has no usable estimate
+    positions: NDArray[np.float64]  # (K, 3) metres, Mid-360 frame
+    n_fallback_dropped: int  # FALLBACK estimates ignored because the track has its own
+
+
+@dataclass(frozen=True)
+class ExportReport:
+    """What :func:`export_results` wrote, and every row it had to fill without a track."""
+
+    out: Path
+    n_rows: int
+    n_sequences: int
+    n_interpolated: int  # rows inside their sequence's estimate span
+    n_extrapolated: int  # rows before the first or after the last estimate (track's motion)
+    n_fallback_rows: int  # rows given FALLBACK_POSITION_M
+    fallback_sequences: tuple[str, ...]  # sequences (as in the rows) with no estimate at all
+    unused_logs: tuple[str, ...]  # logs whose sequence has no row
+    warnings: tuple[str, ...]
+
+    def describe(self) -> str:
+        """A short human-readable summary."""
+        return (
+            f"wrote {self.out}: {self.n_rows} rows in {self.n_sequences} sequences "
+            f"({self.n_interpolated} interpolated, {self.n_extrapolated} extrapolated by the "
+            f"track's motion, {self.n_fallback_rows} at the global fallback position)"
+        )
+
+
+def _source_metadata(log: LogReader) -> tuple[str, str]:
+    """(sequence, split) from the log's ``cldet.source`` metadata."""
+    source = log.metadata().get(topics.METADATA_SOURCE, {})
+    sequence = source.get("sequence", "").strip()
+    if not sequence:
+        raise LogError(
+            f"{log.path}: no sequence name in its {topics.METADATA_SOURCE!r} metadata: "
+            "expected a log written by `cldet convert` (and `cldet annotate`)"
+        )
+    return sequence, source.get("split", "").strip()
+
+
+def read_log_track(path: Path | str) -> LogTrack:
+    """Read a log's sequence name and estimated trajectory (``/cldet/estimate``).
+
+    The trajectory is sorted by stamp; non-finite estimates are dropped, and so are ``FALLBACK``
+    estimates when the log has other ones. A log without the channel gives an empty track.
+
+    Raises:
+        LogError: the log cannot be read, or has no sequence name in its metadata.
+    """
+    with open_log(path) as log:
+        sequence, split = _source_metadata(log)
+        stamps: list[int] = []
+        positions: list[NDArray[np.float64]] = []
+        fallback: list[bool] = []
+        if log.list_topics().get(topics.ESTIMATE, 0) > 0:
+            for estimate, _track_id in log.iter_estimates(topics.ESTIMATE):
+                if np.all(np.isfinite(estimate.position)):
+                    stamps.append(estimate.stamp_ns)
+                    positions.append(estimate.position)
+                    fallback.append(estimate.source == Source.FALLBACK)
+    stamps_ns = np.array(stamps, dtype=np.int64)
+    pos = np.array(positions, dtype=np.float64).reshape(-1, 3)
+    is_fallback = np.array(fallback, dtype=bool)
+    n_dropped = 0
+    if is_fallback.any() and not is_fallback.all():
+        n_dropped = int(is_fallback.sum())
+        stamps_ns, pos = stamps_ns[~is_fallback], pos[~is_fallback]
+    order = np.argsort(stamps_ns, kind="stable")
+    return LogTrack(Path(path), sequence, split, stamps_ns[order], pos[order], n_dropped)
+
+
+def read_log_truth(path: Path | str) -> list[TruthRow]:
+    """The ground-truth rows of one log: ``/ground_truth`` positions, with ``/class`` if present.
+
+    Each row's class is the label at or before its stamp (the first label for earlier stamps);
+    ``None`` when the log has no ``/class`` channel. Timestamps are formatted with 6 decimals.
+
+    Raises:
+        LogError: the log cannot be read, has no sequence name or no ``/ground_truth`` messages.
+    """
+    with open_log(path) as log:
+        sequence, _split = _source_metadata(log)
+        counts = log.list_topics()
+        if counts.get(topics.GROUND_TRUTH, 0) == 0:
+            listing = ", ".join(f"{t} ({n})" for t, n in counts.items()) or "none"
+            raise LogError(
+                f"{log.path}: no {topics.GROUND_TRUTH} messages (sequence {sequence}); "
+                f"topics in the file: {listing}"
+            )
+        truth = list(log.iter_positions(topics.GROUND_TRUTH))
+        labels = list(log.iter_classes(topics.CLASS)) if counts.get(topics.CLASS, 0) > 0 else []
+    label_ns = np.array([c.stamp_ns for c in labels], dtype=np.int64)
+    label_id = [c.class_id for c in labels]
+    rows = []
+    for sample in truth:
+        class_id = None
+        if label_id:
+            i = int(np.searchsorted(label_ns, sample.stamp_ns, side="right")) - 1
+            class_id = label_id[max(i, 0)]
+        x, y, z = (float(v) for v in sample.position)
+        rows.append(
+            TruthRow(sequence, format_stamp(sample.stamp_ns), sample.stamp_ns, (x, y, z), class_id)
+        )
+    return rows
+
+
+def export_results(
+    logs: Iterable[Path | str],
+    out: Path | str,
+    timestamps: Path | str | None = None,
+    class_id: int = DEFAULT_CLASS_ID,
+    *,
+    overwrite: bool = False,
+) -> ExportReport:
+    """Write a submission CSV from annotated logs, one row per query row, atomically.
+
+    Args:
+        logs: annotated MCAP logs, at most one per sequence.
+        out: the results CSV to write (``mmaud_results.csv``).
+        timestamps: the query file (``test_timestamps.csv``); rows are written in its order with
+            its Sequence and Timestamp strings. ``None``: a row at every ``/ground_truth`` stamp
+            of every log, in log order.
+        class_id: the Classification of every row.
+        overwrite: replace an existing ``out``.
+
+    Returns:
+        The :class:`ExportReport`, with the sequences that got the fallback constant.
+
+    Raises:
+        LogError: a log cannot be read or has no sequence name.
+        ResultsError: a malformed query file, two logs of the same sequence, or no row at all.
+        OutputExistsError: ``out`` exists and ``overwrite`` is false.
+    """
+    out_path = Path(out)
+    if out_path.exists() and not overwrite:  # fail before reading every log
+        raise OutputExistsError(
+            f"{out_path} already exists: pass overwrite (--overwrite) to replace it"
+        )
+    queries: Sequence[QueryRow] | None = (
+        read_timestamps(timestamps) if timestamps is not None else None
+    )
+    tracks: dict[str, LogTrack] = {}
+    warnings: list[str] = []
+    for path in logs:
+        log_track = read_log_track(path)
+        key = normalise_sequence(log_track.sequence)
+        if key in tracks:
+            raise ResultsError(
+                f"two logs hold sequence {key}: {tracks[key].path} and {log_track.path}: "
+                "pass one split's logs at a time"
+            )
+        tracks[key] = log_track
+        if log_track.n_fallback_dropped:
+            warnings.append(
+                f"{log_track.path}: ignored {log_track.n_fallback_dropped} FALLBACK estimates; "
+                "the track's own motion bridges them"
+            )
+
+    if queries is None:
+        queries = _truth_queries(tracks.values(), warnings)
+    if not queries:
+        raise ResultsError("nothing to export: no query rows (and no ground truth in the logs)")
+
+    by_sequence: dict[str, list[int]] = {}
+    for i, query in enumerate(queries):
+        by_sequence.setdefault(query.key[0], []).append(i)
+
+    positions = np.empty((len(queries), 3), dtype=np.float64)
+    n_inside = n_outside = n_fallback = 0
+    fallback_sequences: list[str] = []
+    for key, indices in by_sequence.items():
+        query_ns = np.array([queries[i].stamp_ns for i in indices], dtype=np.int64)
+        track = tracks.get(key)
+        if track is None or track.stamps_ns.size == 0:
+            positions[indices] = FALLBACK_POSITION_M
+            n_fallback += len(indices)
+            name = queries[indices[0]].sequence
+            fallback_sequences.append(name)
+            why = "no log" if track is None else f"no estimate in {track.path}"
+            warnings.append(
+                f"sequence {name}: {why}; its {len(indices)} rows get the global fallback "
+                f"position {list(FALLBACK_POSITION_M)}"
+            )
+            continue
+        positions[indices] = evaluate_trajectory(track.stamps_ns, track.positions, query_ns)
+        outside = (query_ns < track.stamps_ns[0]) | (query_ns > track.stamps_ns[-1])
+        n_outside += int(outside.sum())
+        n_inside += int((~outside).sum())
+
+    unused = tuple(str(t.path) for k, t in tracks.items() if k not in by_sequence)
+    if unused:
+        warnings.append(f"{len(unused)} logs have no query row: {', '.join(unused)}")
+
+    rows = [
+        ResultRow(q.sequence, q.timestamp, q.stamp_ns, (p[0], p[1], p[2]), int(class_id))
+        for q, p in zip(queries, positions.tolist(), strict=True)
+    ]
+    write_results(out_path, rows, overwrite=overwrite)
+    return ExportReport(
+        out=out_path,
+        n_rows=len(rows),
+        n_sequences=len(by_sequence),
+        n_interpolated=n_inside,
+        n_extrapolated=n_outside,
+        n_fallback_rows=n_fallback,
+        fallback_sequences=tuple(fallback_sequences),
+        unused_logs=unused,
+        warnings=tuple(warnings),
+    )
+
+
+def _truth_queries(tracks: Iterable[LogTrack], warnings: list[str]) -> Sequence[QueryRow]:
+    """Query rows at every ``/ground_truth`` stamp of the logs (logs without it: a warning)."""
+    queries: list[QueryRow] = []
+    for track in tracks:
+        try:
+            truth = read_log_truth(track.path)
+        except LogError as err:
+            warnings.append(f"skipped: {err}")
+            continue
+        queries.extend(QueryRow(track.sequence, t.timestamp, t.stamp_ns) for t in truth)
+    return queries
