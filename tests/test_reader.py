@@ -358,6 +358,8 @@ def test_missing_file(tmp_path: Path) -> None:
         ((), r"\(\)"),
         ((20064, 4), r"\(20064, 4\)"),
         ((5, 2), r"\(5, 2\)"),
+        ((0, 4), r"\(0, 4\)"),  # empty, but not an (N, 3) array either
+        ((0, 3, 1), r"\(0, 3, 1\)"),
     ],
 )
 def test_wrong_shape(tmp_path: Path, shape: tuple[int, ...], shown: str) -> None:
