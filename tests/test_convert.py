@@ -1,0 +1,439 @@
+"""``converters.mcap_convert`` and ``cldet convert``: round trips bit for bit, crashes, bad input."""
+
+from __future__ import annotations
+
+import io
+import shutil
+import struct
+import subprocess
+import warnings
+import zlib
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+from mcap.reader import make_reader
+from typer.testing import CliRunner
+
+import cldet
+from cldet.io import LogWriter, open_log
+from cldet.io import topics as tp
+from converters import mcap_convert, mmaud
+from converters.mcap_convert import convert_dataset, convert_sequence
+
+CLOUD_DIRS = {"lidar_360": tp.LIDAR_360, "livox_avia": tp.LIVOX_AVIA, "radar_enhance_pcl": tp.RADAR}
+
+
+# --- building tiny datasets --------------------------------------------------------------------
+def make_png(width: int, height: int) -> bytes:
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (
+            struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+        )
+
+    raw = b"".join(b"\x00" + b"\x40" * (3 * width) for _ in range(height))
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", ihdr)
+        + chunk(b"IDAT", zlib.compress(raw))
+        + chunk(b"IEND", b"")
+    )
+
+
+def stamp_names(start_s: int, n: int, period_us: int, offset_us: int = 0) -> list[str]:
+    names = []
+    for i in range(n):
+        us = offset_us + i * period_us + (i * 37) % 1000
+        names.append(f"{start_s + us // 1_000_000}.{us % 1_000_000:06d}")
+    return names
+
+
+def build_sequence(seq_dir: Path, rng: np.random.Generator, *, labels: bool, n: int = 6) -> None:
+    """A tiny challenge sequence: clouds with zero rows, empty radar frames, labels, PNGs."""
+    start = 1_706_255_621
+    for name in stamp_names(start, n, 100_000, 600_227):  # Mid-360: packets of zero rows
+        a = np.round(rng.normal(0, 20, (96 * 5, 3)), 3)
+        a[96:288] = 0.0
+        a[rng.random(len(a)) < 0.3] = 0.0
+        np.save(seq_dir / "lidar_360" / f"{name}.npy", a)
+    for i, name in enumerate(stamp_names(start, n, 100_000, 614_227)):  # Avia: -0.0 zeros
+        a = np.tile(np.array([-0.0, -0.0, 0.0]), (240, 1))
+        if i % 2:
+            a[:i] = rng.normal(0, 50, (i, 3))
+        np.save(seq_dir / "livox_avia" / f"{name}.npy", a)
+    for i, name in enumerate(stamp_names(start, n + 3, 66_667, 601_000)):  # radar: (0,) empties
+        a = np.empty((0,)) if i % 3 == 0 else rng.normal(0, 5, (2 + i, 3))
+        np.save(seq_dir / "radar_enhance_pcl" / f"{name}.npy", a)
+    if labels:
+        gt_names = stamp_names(start, 2 * n, 50_000, 565_000)
+        gt_names[1] = gt_names[1].rstrip("0") or gt_names[1]  # a float-printed name
+        gt_names[2] = f"{start}.71419"  # fewer than 6 decimals = .714190
+        for name in gt_names:
+            np.save(seq_dir / "ground_truth" / f"{name}.npy", rng.normal(0, 10, 3))
+            np.save(seq_dir / "class" / f"{name}.npy", np.array([2]))
+    for name in stamp_names(start, 3, 33_333, 602_000):
+        (seq_dir / "Image" / f"{name}.png").write_bytes(make_png(24, 8))
+
+
+def build_dataset(root: Path, n_train: int = 2, n_val: int = 1, seed: int = 0) -> Path:
+    rng = np.random.default_rng(seed)
+    for split, count, labels in (("train", n_train, True), ("val", n_val, False)):
+        for i in range(1, count + 1):
+            seq_dir = root / split / f"seq{i:04d}"
+            folders = list(CLOUD_DIRS) + ["Image"] + (["ground_truth", "class"] if labels else [])
+            for folder in folders:
+                (seq_dir / folder).mkdir(parents=True)
+            build_sequence(seq_dir, rng, labels=labels)
+    return root
+
+
+@pytest.fixture
+def tiny(tmp_path: Path) -> Path:
+    return build_dataset(tmp_path / "data")
+
+
+# --- an independent reference of what a log must hold --------------------------------------------
+def ns_from_name(name: str) -> int:
+    seconds, fraction = name.split(".")
+    return int(seconds) * 1_000_000_000 + int(fraction.ljust(6, "0")) * 1000
+
+
+def stamped_files(folder: Path, suffix: str) -> list[tuple[int, Path]]:
+    return sorted((ns_from_name(p.name[: -len(suffix)]), p) for p in folder.glob(f"*{suffix}"))
+
+
+def expected_points(path: Path) -> np.ndarray:
+    a = np.load(path)
+    if a.size == 0:
+        return np.empty((0, 3), np.float32)
+    return a[~np.all(a == 0, axis=1)].astype(np.float32)
+
+
+def raw_messages(log: Path, topic: str) -> list:
+    with open(log, "rb") as f:
+        return [m for _, _, m in make_reader(f).iter_messages(topics=[topic])]
+
+
+def check_log(log: Path, seq_dir: Path, *, images: bool = True) -> None:
+    """Every channel of ``log`` equals the source folder, bit for bit, with exact stamps."""
+    topics_in_log = open_log(log).list_topics()
+    for folder, topic in CLOUD_DIRS.items():
+        if not (seq_dir / folder).is_dir():
+            assert topic not in topics_in_log
+            continue
+        files = stamped_files(seq_dir / folder, ".npy")
+        messages = raw_messages(log, topic)
+        assert len(messages) == len(files), topic
+        for message, (stamp, path) in zip(messages, files, strict=True):
+            assert message.log_time == message.publish_time == stamp, path
+            cloud = PointCloud.FromString(message.data)
+            assert cloud.timestamp.ToNanoseconds() == stamp
+            assert cloud.frame_id == ("radar" if folder == "radar_enhance_pcl" else "mid360")
+            assert cloud.point_stride == 12
+            assert [(f.name, f.offset) for f in cloud.fields] == [("x", 0), ("y", 4), ("z", 8)]
+            assert cloud.pose.HasField("position") and cloud.pose.orientation.w == 1.0
+            want = expected_points(path)
+            assert cloud.data == want.tobytes(), path  # float32 bit for bit
+        clouds = list(open_log(log).iter_clouds(topic))  # and through cldet's own reader
+        for cloud_read, (stamp, path) in zip(clouds, files, strict=True):
+            assert cloud_read.stamp_ns == stamp
+            want = expected_points(path)
+            assert np.ascontiguousarray(cloud_read.points).tobytes() == want.tobytes()
+    if (seq_dir / "ground_truth").is_dir():
+        files = stamped_files(seq_dir / "ground_truth", ".npy")
+        got = list(open_log(log).iter_positions(tp.GROUND_TRUTH))
+        assert [g.stamp_ns for g in got] == [s for s, _ in files]
+        for g, (_, path) in zip(got, files, strict=True):
+            assert np.array_equal(g.position, np.load(path))
+        messages = raw_messages(log, tp.GROUND_TRUTH)
+        assert all(m.log_time == m.publish_time for m in messages)
+        labels = list(open_log(log).iter_classes(tp.CLASS))
+        assert [(c.stamp_ns, c.class_id) for c in labels] == [
+            (s, int(np.load(p)[0])) for s, p in stamped_files(seq_dir / "class", ".npy")
+        ]
+    if (seq_dir / "Image").is_dir() and images:
+        files = stamped_files(seq_dir / "Image", ".png")
+        messages = raw_messages(log, tp.IMAGE)
+        calibrations = raw_messages(log, tp.IMAGE_CALIBRATION)
+        assert [m.log_time for m in messages] == [s for s, _ in files]
+        assert [m.log_time for m in calibrations] == [s for s, _ in files]
+        for message, cal, (_, path) in zip(messages, calibrations, files, strict=True):
+            image = CompressedImage.FromString(message.data)
+            assert image.data == path.read_bytes() and image.format == "png"
+            assert CameraCalibration.FromString(cal.data).frame_id == image.frame_id
+    else:
+        assert tp.IMAGE not in topics_in_log
+    meta = open_log(log).metadata()[tp.METADATA_SOURCE]
+    assert meta["split"] == seq_dir.parent.name and meta["sequence"] == seq_dir.name
+    assert Path(meta["source"]) == seq_dir.resolve()
+    assert meta["cldet_version"] == cldet.__version__
+    for folder in mmaud.MODALITIES:
+        if (seq_dir / folder).is_dir() and (images or folder != "Image"):
+            n = len(list((seq_dir / folder).iterdir()))
+            assert meta[f"count.{folder}"] == str(n), folder
+            assert topics_in_log[tp.MODALITY_TOPICS[folder]] == n
+
+
+def leftovers(out: Path) -> list[str]:
+    return sorted(p.name for p in out.rglob("*") if p.is_file() and ".tmp-" in p.name)
+
+
+class CountingProgress:
+    def __init__(self) -> None:
+        self.total = -1
+        self.done = 0
+
+    def start(self, total: int, description: str) -> None:
+        self.total = total
+
+    def advance(self, n: int = 1) -> None:
+        self.done += n
+
+
+# --- round trips -----------------------------------------------------------------------------
+def test_convert_tiny_dataset_round_trips(tiny: Path, tmp_path: Path) -> None:
+    out = tmp_path / "logs"
+    progress = CountingProgress()
+    report = convert_dataset(tiny, out, workers=1, progress=progress)
+    assert report.ok and not report.skipped
+    expected = [out / "train/seq0001.mcap", out / "train/seq0002.mcap", out / "val/seq0001.mcap"]
+    assert list(report.converted) == expected
+    for log in expected:
+        check_log(log, tiny / log.parent.name / log.stem)
+    n_files = sum(1 for p in tiny.rglob("*") if p.is_file())
+    assert report.frames == progress.total == progress.done == n_files
+    assert report.bytes_in == sum(p.stat().st_size for p in tiny.rglob("*") if p.is_file())
+    assert report.bytes_out == sum(p.stat().st_size for p in expected)
+    assert leftovers(out) == []
+
+
+def test_convert_sequence_into_memory(tiny: Path) -> None:
+    (seq,) = mmaud.find_sequences(tiny, splits=["val"])
+    buffer = io.BytesIO()
+    with LogWriter(buffer, compression="lz4") as writer:
+        counts = convert_sequence(seq, writer, images=False)
+    assert counts == {m: len(list((seq.path / m).iterdir())) for m in CLOUD_DIRS}
+    assert not buffer.closed
+    log = tiny.parent / "mem.mcap"
+    log.write_bytes(buffer.getvalue())
+    check_log(log, seq.path, images=False)
+
+
+def test_real_sample_round_trips(real_sample: Path, tmp_path: Path) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the sample's reference/ folder is not a split
+        report = convert_dataset(real_sample, tmp_path, splits=["val"], workers=1)
+    assert report.ok, report.describe()
+    log = tmp_path / "val" / "seq0001.mcap"
+    check_log(log, real_sample / "val" / "seq0001")
+    counts = open_log(log).list_topics()
+    assert counts == {tp.LIDAR_360: 88, tp.LIVOX_AVIA: 88, tp.RADAR: 132}
+    assert report.bytes_out < report.bytes_in / 10  # valid float32 rows only, compressed
+
+
+def test_simulated_sequence_round_trips(tmp_path: Path) -> None:
+    simulate = pytest.importorskip("cldet.simulate")
+    if not hasattr(simulate, "simulate_sequence"):
+        pytest.skip("cldet.simulate.simulate_sequence is not available yet")
+    seq_dir = tmp_path / "sim" / "train" / "seq0007"
+    simulate.simulate_sequence(seq_dir, seed=11, duration_s=1.0)
+    report = convert_dataset(tmp_path / "sim", tmp_path / "logs", workers=1)
+    assert report.ok, report.describe()
+    check_log(tmp_path / "logs" / "train" / "seq0007.mcap", seq_dir)
+
+
+def test_no_images(tiny: Path, tmp_path: Path) -> None:
+    report = convert_dataset(tiny, tmp_path / "logs", splits=["train"], workers=1, images=False)
+    assert report.ok
+    log = tmp_path / "logs" / "train" / "seq0001.mcap"
+    check_log(log, tiny / "train" / "seq0001", images=False)
+    assert "count.Image" not in open_log(log).metadata()[tp.METADATA_SOURCE]
+
+
+def test_rerun_imports_the_converted_log_as_points3d(tiny: Path, tmp_path: Path) -> None:
+    rerun_cli = shutil.which("rerun")
+    if rerun_cli is None:
+        pytest.skip("the `rerun` binary is not in PATH (pip install rerun-sdk)")
+    import rerun as rr
+
+    convert_dataset(tiny, tmp_path / "logs", sequences=["seq0001"], splits=["train"], workers=1)
+    rrd = tmp_path / "x.rrd"
+    log = tmp_path / "logs" / "train" / "seq0001.mcap"
+    run = subprocess.run(
+        [rerun_cli, "mcap", "convert", str(log), "-o", str(rrd)], capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stderr
+    run = subprocess.run([rerun_cli, "rrd", "verify", str(rrd)], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    columns = rr.chunk.RrdReader(str(rrd)).store().schema().component_columns()
+    points3d = {c.entity_path for c in columns if c.component == "Points3D:positions"}
+    assert points3d >= {tp.LIDAR_360, tp.LIVOX_AVIA, tp.RADAR}
+
+
+# --- crashes, bad input, existing outputs -------------------------------------------------------
+def fail_on_nth_cloud(monkeypatch: pytest.MonkeyPatch, n: int, exc: BaseException) -> None:
+    original: Callable[..., None] = LogWriter.write_cloud
+    calls = {"n": 0}
+
+    def failing(self: LogWriter, *args: object, **kwargs: object) -> None:
+        calls["n"] += 1
+        if calls["n"] == n:
+            raise exc
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(LogWriter, "write_cloud", failing)
+
+
+@pytest.mark.parametrize("exc", [KeyboardInterrupt(), RuntimeError("disk on fire")])
+def test_crash_midway_leaves_no_file(
+    tiny: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, exc: BaseException
+) -> None:
+    out = tmp_path / "logs"
+    fail_on_nth_cloud(monkeypatch, 5, exc)
+    with pytest.raises(type(exc)):
+        convert_dataset(tiny, out, splits=["val"], workers=1)
+    assert sorted(p.name for p in (out / "val").iterdir()) == []  # no .mcap, no temp file
+
+
+@pytest.mark.parametrize("exc", [KeyboardInterrupt(), RuntimeError("disk on fire")])
+def test_crash_keeps_the_earlier_output(
+    tiny: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, exc: BaseException
+) -> None:
+    out = tmp_path / "logs"
+    assert convert_dataset(tiny, out, splits=["val"], workers=1).ok
+    earlier = (out / "val" / "seq0001.mcap").read_bytes()
+    fail_on_nth_cloud(monkeypatch, 9, exc)
+    with pytest.raises(type(exc)):
+        convert_dataset(tiny, out, splits=["val"], workers=1, overwrite=True)
+    assert (out / "val" / "seq0001.mcap").read_bytes() == earlier
+    assert sorted(p.name for p in (out / "val").iterdir()) == ["seq0001.mcap"]
+
+
+def corrupt_one_file(tiny: Path) -> Path:
+    bad = sorted((tiny / "train" / "seq0002" / "lidar_360").iterdir())[3]
+    bad.write_bytes(bad.read_bytes()[:100])  # truncated .npy
+    return bad
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_bad_sequence_is_reported_and_others_convert(
+    tiny: Path, tmp_path: Path, workers: int
+) -> None:
+    bad = corrupt_one_file(tiny)
+    out = tmp_path / "logs"
+    progress = CountingProgress()
+    report = convert_dataset(tiny, out, workers=workers, progress=progress)
+    assert not report.ok
+    assert [f.sequence for f in report.failed] == ["train/seq0002"]
+    assert (
+        str(bad) in report.failed[0].message and "truncated or corrupt" in report.failed[0].message
+    )
+    assert list(report.converted) == [out / "train/seq0001.mcap", out / "val/seq0001.mcap"]
+    check_log(out / "train/seq0001.mcap", tiny / "train/seq0001")
+    assert not (out / "train/seq0002.mcap").exists()
+    assert leftovers(out) == []
+    assert progress.done >= report.frames > 0  # worker progress reached the parent
+    assert "FAILED 1 sequence(s)" in report.describe() and str(bad) in report.describe()
+
+
+def test_existing_output_is_skipped_unless_overwrite(tiny: Path, tmp_path: Path) -> None:
+    out = tmp_path / "logs"
+    convert_dataset(tiny, out, splits=["val"], workers=1)
+    log = out / "val" / "seq0001.mcap"
+    log.write_bytes(b"an older log")
+    report = convert_dataset(tiny, out, splits=["val"], workers=1)
+    assert report.skipped == (log,) and report.converted == () and report.ok
+    assert log.read_bytes() == b"an older log"
+    assert "skipped 1 existing log(s)" in report.describe()
+    report = convert_dataset(tiny, out, splits=["val"], workers=1, overwrite=True)
+    assert report.converted == (log,)
+    check_log(log, tiny / "val" / "seq0001")
+
+
+def test_unknown_compression_and_missing_root(tmp_path: Path) -> None:
+    from cldet.errors import DatasetError, LogError
+
+    with pytest.raises(LogError, match="unknown compression 'gzip'"):
+        convert_dataset(tmp_path, tmp_path / "out", compression="gzip")
+    with pytest.raises(DatasetError, match="absent"):
+        convert_dataset(tmp_path / "absent", tmp_path / "out")
+
+
+def test_image_with_a_bad_header_names_the_folder(tiny: Path, tmp_path: Path) -> None:
+    png = sorted((tiny / "val" / "seq0001" / "Image").iterdir())[1]
+    png.write_bytes(png.read_bytes()[:10])  # PNG signature, no IHDR
+    report = convert_dataset(tiny, tmp_path / "logs", splits=["val"], workers=1)
+    (failure,) = report.failed
+    assert str(tiny / "val" / "seq0001" / "Image") in failure.message
+    assert "not a valid PNG" in failure.message
+
+
+# --- the CLI ---------------------------------------------------------------------------------
+@pytest.fixture
+def cli() -> Callable[..., object]:
+    from cldet.cli import app
+
+    runner = CliRunner()
+    return lambda *args: runner.invoke(app, [str(a) for a in args])
+
+
+def test_cli_help_teaches(cli: Callable[..., object]) -> None:
+    result = cli("convert", "--help")
+    assert result.exit_code == 0  # type: ignore[attr-defined]
+    text = result.output  # type: ignore[attr-defined]
+    for word in (
+        "--split",
+        "--sequence",
+        "--workers",
+        "--compression",
+        "--no-images",
+        "--overwrite",
+        "/lidar_360",
+    ):
+        assert word in text
+
+
+def test_cli_converts_and_reports_failures(
+    cli: Callable[..., object], tiny: Path, tmp_path: Path
+) -> None:
+    bad = corrupt_one_file(tiny)
+    out = tmp_path / "logs"
+    result = cli(
+        "convert", tiny, "-o", out, "--workers", 1, "--compression", "lz4", "--split", "train"
+    )
+    assert result.exit_code == 1  # type: ignore[attr-defined]
+    output = result.output  # type: ignore[attr-defined]
+    assert (
+        "train/seq0002" in output and str(bad) in output and "ERROR: 1 sequence(s) failed" in output
+    )
+    log = out / "train" / "seq0001.mcap"
+    check_log(log, tiny / "train" / "seq0001")
+    with open(log, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and {c.compression for c in summary.chunk_indexes} == {"lz4"}
+
+    result = cli("convert", tiny, "-o", out, "--sequence", "seq1", "--split", "train")
+    assert result.exit_code == 0  # type: ignore[attr-defined]
+    assert "skipped 1 existing log(s)" in result.output  # type: ignore[attr-defined]
+
+
+def test_cli_error_for_missing_split(
+    cli: Callable[..., object], tiny: Path, tmp_path: Path
+) -> None:
+    result = cli("convert", tiny, "-o", tmp_path / "logs", "--split", "test")
+    assert result.exit_code == 1  # type: ignore[attr-defined]
+    assert "ERROR: split folder" in result.output  # type: ignore[attr-defined]
+
+
+def test_module_exports() -> None:
+    assert mcap_convert.__all__ == [
+        "ConvertFailure",
+        "ConvertReport",
+        "convert_dataset",
+        "convert_sequence",
+    ]
