@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cldet.errors import LogError, ResultsError
+from cldet.progress import NullProgress, Progress
 from cldet.results import (
     ResultRow,
     RowKey,
@@ -330,12 +331,12 @@ def write_errors_parquet(
     write_atomic(path, write, overwrite=overwrite)
 
 
-def truth_from_logs(logs: Iterable[Path | str]) -> TruthTable:
+def truth_from_logs(logs: Iterable[Path | str], progress: Progress | None = None) -> TruthTable:
     """Ground truth from annotated (or converted) MCAP logs with a ``/ground_truth`` channel.
 
     The sequence name comes from each log's ``cldet.source`` metadata; the class, when the log
     has a ``/class`` channel, is the label at or before each ground-truth stamp (the first label
-    for earlier stamps).
+    for earlier stamps). ``progress`` (optional) is told about each log read.
 
     Raises:
         LogError: a log cannot be read, has no sequence name or no ground truth.
@@ -348,8 +349,12 @@ def truth_from_logs(logs: Iterable[Path | str]) -> TruthTable:
     paths = [Path(p) for p in logs]
     if not paths:
         raise LogError("no logs given: expected annotated MCAP logs with a /ground_truth channel")
+    bar: Progress = progress if progress is not None else NullProgress()
+    bar.start(len(paths), "reading ground truth")
     for path in paths:
-        for row in read_log_truth(path):
+        log_rows = read_log_truth(path)
+        bar.advance()
+        for row in log_rows:
             if row.key in seen:
                 raise ResultsError(
                     f"{path}: sequence {row.key[0]} at {row.timestamp} is also in {seen[row.key]}: "

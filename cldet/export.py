@@ -32,6 +32,7 @@ from cldet.core.trajectory import evaluate_trajectory
 from cldet.errors import LogError, OutputExistsError, ResultsError
 from cldet.io import topics
 from cldet.io.mcap_read import LogReader, open_log
+from cldet.progress import NullProgress, Progress
 from cldet.results import (
     QueryRow,
     ResultRow,
@@ -169,6 +170,8 @@ def export_results(
     class_id: int = DEFAULT_CLASS_ID,
     *,
     overwrite: bool = False,
+    max_extrapolation_ns: int | None = None,
+    progress: Progress | None = None,
 ) -> ExportReport:
     """Write a submission CSV from annotated logs, one row per query row, atomically.
 
@@ -180,6 +183,10 @@ def export_results(
             of every log, in log order.
         class_id: the Classification of every row.
         overwrite: replace an existing ``out``.
+        max_extrapolation_ns: follow the track's motion at most this far beyond its first or
+            last estimate, then hold (see :func:`~cldet.core.trajectory.evaluate_trajectory`);
+            ``None``: no limit.
+        progress: told about each log read (``None``: silent).
 
     Returns:
         The :class:`ExportReport`, with the sequences that got the fallback constant.
@@ -199,8 +206,12 @@ def export_results(
     )
     tracks: dict[str, LogTrack] = {}
     warnings: list[str] = []
-    for path in logs:
+    paths = [Path(p) for p in logs]
+    bar: Progress = progress if progress is not None else NullProgress()
+    bar.start(len(paths), "reading estimates")
+    for path in paths:
         log_track = read_log_track(path)
+        bar.advance()
         key = normalise_sequence(log_track.sequence)
         if key in tracks:
             raise ResultsError(
@@ -240,11 +251,18 @@ def export_results(
                 f"position {list(FALLBACK_POSITION_M)}"
             )
             continue
-        positions[indices] = evaluate_trajectory(track.stamps_ns, track.positions, query_ns)
+        positions[indices] = evaluate_trajectory(
+            track.stamps_ns, track.positions, query_ns, max_extrapolation_ns=max_extrapolation_ns
+        )
         outside = (query_ns < track.stamps_ns[0]) | (query_ns > track.stamps_ns[-1])
         n_outside += int(outside.sum())
         n_inside += int((~outside).sum())
 
+    if n_fallback == len(queries):
+        warnings.append(
+            f"no row has an estimate: every row is at the global fallback position; "
+            f"were the logs annotated (`cldet annotate`, channel {topics.ESTIMATE})?"
+        )
     unused = tuple(str(t.path) for k, t in tracks.items() if k not in by_sequence)
     if unused:
         warnings.append(f"{len(unused)} logs have no query row: {', '.join(unused)}")

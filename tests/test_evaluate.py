@@ -244,3 +244,18 @@ def test_truth_from_logs_and_cli(tmp_path: Path, files: tuple[Path, Path]) -> No
     )
     with pytest.raises(ResultsError, match=r"b\.mcap: sequence seq0002 .* is also in .*dup\.mcap"):
         truth_from_logs([dup, b])
+
+
+def test_cli_evaluate_keeps_an_existing_parquet(tmp_path: Path, files: tuple[Path, Path]) -> None:
+    results, truth = files
+    parquet = tmp_path / "e.parquet"
+    parquet.write_bytes(b"keep")
+    args = ["evaluate", str(results), "--truth", str(truth), "--errors-parquet", str(parquet)]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 1
+    assert "e.parquet already exists: pass --overwrite" in result.stderr
+    assert parquet.read_bytes() == b"keep"
+    result = CliRunner().invoke(app, [*args, "--overwrite"])
+    assert result.exit_code == 0, result.output
+    assert f"per-row errors written to {parquet}" in result.stdout
+    assert pq.read_table(parquet).num_rows == 4

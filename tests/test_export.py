@@ -225,3 +225,21 @@ def test_cli_export_bad_query(tmp_path: Path, logs: list[Path]) -> None:
     result = CliRunner().invoke(app, ["export", str(logs[0]), "-t", str(query), "-o", "x.csv"])
     assert result.exit_code == 1
     assert "ERROR:" in result.stderr and "q.csv:2: bad Timestamp 'noon'" in result.stderr
+
+
+def test_every_row_at_the_fallback_is_flagged(tmp_path: Path) -> None:
+    log = make_log(tmp_path / "raw.mcap", "seq0001", truth=[(T0, np.zeros(3))])
+    report = export_results([log], tmp_path / "r.csv")
+    assert report.n_fallback_rows == report.n_rows == 1
+    assert any("were the logs annotated" in w for w in report.warnings)
+
+
+def test_cli_max_extrapolation(tmp_path: Path, logs: list[Path]) -> None:
+    query = tmp_path / "q.csv"
+    query.write_text("Sequence,Timestamp,Position,Classification\nseq0001,1713163004.500000,,\n")
+    out = tmp_path / "r.csv"
+    args = ["export", str(logs[0]), "-t", str(query), "-o", str(out)]
+    result = CliRunner().invoke(app, [*args, "--max-extrapolation-s", "0.5"])
+    assert result.exit_code == 0, result.output
+    held = line([T0 + 3_500_000_000])[0]  # 0.5 s past the last estimate (T0 + 3 s), then held
+    np.testing.assert_allclose(read_results(out)[0].position, held, atol=1e-6)

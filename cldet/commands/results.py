@@ -36,6 +36,15 @@ def export(
     class_id: Annotated[
         int, typer.Option("--class-id", help="Classification written on every row.")
     ] = 0,
+    max_extrapolation_s: Annotated[
+        float | None,
+        typer.Option(
+            "--max-extrapolation-s",
+            min=0.0,
+            help="Follow the track's motion at most this many seconds beyond its first/last "
+            "estimate, then hold. Default: no limit.",
+        ),
+    ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
 ) -> None:
     """Write the challenge submission from annotated logs: one row per query row, in its order.
@@ -45,9 +54,19 @@ def export(
     any estimate gets the training-set mean position (0.734, -9.739, 33.353) and a warning.
     """
     from cldet.export import export_results
+    from cldet.progress import BarProgress
 
-    with handled():
-        report = export_results(logs, out, timestamps, class_id, overwrite=overwrite)
+    limit_ns = None if max_extrapolation_s is None else round(max_extrapolation_s * 1e9)
+    with handled(), BarProgress() as bar:
+        report = export_results(
+            logs,
+            out,
+            timestamps,
+            class_id,
+            overwrite=overwrite,
+            max_extrapolation_ns=limit_ns,
+            progress=bar,
+        )
     for warning in report.warnings:
         echo_err(f"WARNING: {warning}")
     typer.echo(report.describe())
@@ -79,6 +98,9 @@ def evaluate(
         Path | None,
         typer.Option("--errors-parquet", help="Write the per-row errors to this Parquet file."),
     ] = None,
+    overwrite: Annotated[
+        bool, typer.Option(help="Replace the --errors-parquet file if it exists.")
+    ] = False,
 ) -> None:
     """Score a results CSV against ground truth (a truth CSV or annotated logs).
 
@@ -87,8 +109,9 @@ def evaluate(
     class accuracy per row, and a per-sequence table. Missing, duplicate and unmatched rows are
     counted and reported; the metrics cover the matched rows.
     """
-    from cldet.errors import ResultsError
+    from cldet.errors import OutputExistsError, ResultsError
     from cldet.evaluate import evaluate_results, truth_from_logs, write_errors_parquet
+    from cldet.progress import BarProgress
     from cldet.results import read_truth
 
     with handled():
@@ -99,10 +122,18 @@ def evaluate(
             )
         if from_logs and not logs:
             raise ResultsError("--logs needs at least one log after RESULTS")
-        table = read_truth(truth) if truth is not None else truth_from_logs(logs or [])
+        if errors_parquet is not None and errors_parquet.exists() and not overwrite:
+            raise OutputExistsError(
+                f"{errors_parquet} already exists: pass --overwrite to replace it"
+            )
+        if truth is not None:
+            table = read_truth(truth)
+        else:
+            with BarProgress() as bar:
+                table = truth_from_logs(logs or [], progress=bar)
         evaluation = evaluate_results(results, table)
         if errors_parquet is not None:
-            write_errors_parquet(evaluation, errors_parquet, overwrite=True)
+            write_errors_parquet(evaluation, errors_parquet, overwrite=overwrite)
 
     for warning in evaluation.warnings:
         echo_err(f"WARNING: {warning}")
