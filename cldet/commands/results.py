@@ -19,7 +19,8 @@ if TYPE_CHECKING:
 @app.command()
 def export(
     logs: Annotated[
-        list[Path], typer.Argument(help="Annotated MCAP logs, one per sequence (one split).")
+        list[Path],
+        typer.Argument(metavar="LOGS", help="Annotated MCAP logs, one per sequence (one split)."),
     ],
     out: Annotated[
         Path, typer.Option("--out", "-o", help="The results CSV to write (mmaud_results.csv).")
@@ -74,10 +75,15 @@ def export(
 
 @app.command()
 def evaluate(
-    results: Annotated[Path, typer.Argument(help="The results CSV (mmaud_results.csv).")],
+    results: Annotated[
+        Path, typer.Argument(metavar="RESULTS", help="The results CSV (mmaud_results.csv).")
+    ],
     logs: Annotated[
         list[Path] | None,
-        typer.Argument(help="Annotated MCAP logs holding the truth (/ground_truth, /class)."),
+        typer.Argument(
+            metavar="LOGS",
+            help="Annotated MCAP logs holding the truth (/ground_truth, /class).",
+        ),
     ] = None,
     truth: Annotated[
         Path | None,
