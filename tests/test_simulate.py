@@ -1,0 +1,360 @@
+"""Tests of the synthetic dataset generator: layout, determinism, gaps, scenarios, CLI."""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import re
+import struct
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from cldet.cli import app  # importing cldet.cli registers every command
+from cldet.errors import ConfigError, OutputExistsError
+from cldet.simulate import (
+    PRESETS,
+    PRISM_OFFSET_M,
+    SCENARIOS,
+    SequenceTruth,
+    simulate_dataset,
+    simulate_sequence,
+)
+from cldet.stamps import parse_stamp
+
+NAME_RE = re.compile(r"^\d{10}\.\d{6}\.(npy|png)$")
+SENSORS = ("lidar_360", "livox_avia", "radar_enhance_pcl", "Image")
+LABELS = ("ground_truth", "class")
+
+
+def _stamps(folder: Path) -> list[int]:
+    return sorted(parse_stamp(p.name.rsplit(".", 1)[0]) for p in folder.iterdir())
+
+
+def _tree_digest(root: Path) -> str:
+    digest = hashlib.sha256()
+    for path in sorted(p for p in root.rglob("*") if p.is_file()):
+        digest.update(str(path.relative_to(root)).encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny dataset (one short sequence per split), seed 3."""
+    out = tmp_path_factory.mktemp("sim") / "data"
+    simulate_dataset(out, preset="tiny", seed=3)
+    return out
+
+
+@pytest.fixture(scope="module")
+def sequences(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, SequenceTruth]]:
+    """One 4 s sequence per scenario, each with its own seed."""
+    root = tmp_path_factory.mktemp("scenarios")
+    out = {}
+    for i, scenario in enumerate(SCENARIOS):
+        seq = root / scenario
+        out[scenario] = (
+            seq,
+            simulate_sequence(seq, seed=100 + i, duration_s=4.0, scenario=scenario),
+        )
+    return out
+
+
+def test_layout_folders_and_names(tiny: Path) -> None:
+    assert sorted(p.name for p in tiny.iterdir()) == [
+        "test",
+        "test_timestamps.csv",
+        "test_truth.csv",
+        "train",
+        "val",
+        "val_truth.csv",
+    ]
+    for split in ("train", "val", "test"):
+        seqs = sorted(p.name for p in (tiny / split).iterdir())
+        assert seqs == ["seq0001"]
+        seq = tiny / split / "seq0001"
+        expected = set(SENSORS) | (set(LABELS) if split == "train" else set())
+        assert {p.name for p in seq.iterdir()} == expected
+        for folder in seq.iterdir():
+            names = [p.name for p in folder.iterdir()]
+            assert names, folder
+            bad = [n for n in names if not NAME_RE.match(n)]
+            assert not bad, f"{folder}: {bad[:3]}"
+            assert all(n.endswith(".png") == (folder.name == "Image") for n in names)
+
+
+def test_mid360_frames(tiny: Path) -> None:
+    sizes = []
+    for path in sorted((tiny / "train" / "seq0001" / "lidar_360").iterdir()):
+        a = np.load(path)
+        assert a.dtype == np.float64 and a.ndim == 2 and a.shape[1] == 3
+        sizes.append(a.shape[0])
+        valid = np.any(a != 0, axis=1)
+        assert 0.1 < valid.mean() < 0.35  # ~21% valid rows
+        # zeros come in whole 96-row packets often (sky patches)
+        per_packet = valid[: len(valid) // 96 * 96].reshape(-1, 96).sum(axis=1)
+        assert (per_packet == 0).sum() > 10
+        # mm quantisation, stored as float32 values
+        v = a[valid]
+        assert np.array_equal(v, v.astype(np.float32).astype(np.float64))
+        assert np.abs(v * 1000 - np.round(v * 1000)).max() < 0.01
+    assert set(sizes) <= {20064, 19968, 40032}
+    singles = [s for s in sizes if s != 40032]
+    # the 20064, 19968, 19968 cycle (a merged frame replaces a 20064 + 19968 pair)
+    assert singles.count(20064) in (len(singles) // 3, len(singles) // 3 + 1)
+
+
+def test_avia_frames_zero_rows_are_negative_zero(tiny: Path) -> None:
+    files = sorted((tiny / "val" / "seq0001" / "livox_avia").iterdir())
+    for path in files:
+        a = np.load(path)
+        assert a.shape == (24000, 3) and a.dtype == np.float64
+        zero = ~np.any(a != 0, axis=1)
+        assert zero.sum() > 23000
+        z = a[zero]
+        assert np.signbit(z[:, 0]).all() and np.signbit(z[:, 1]).all()
+        assert not np.signbit(z[:, 2]).any()
+        v = a[~zero]
+        if len(v):
+            el = np.degrees(np.arcsin(v[:, 2] / np.linalg.norm(v, axis=1)))
+            assert el.min() >= 51.9
+
+
+def test_radar_frames(tiny: Path) -> None:
+    shapes = [np.load(p).shape for p in tiny.glob("*/seq*/radar_enhance_pcl/*.npy")]
+    assert all(s == (0,) or (len(s) == 2 and s[1] == 3 and s[0] > 0) for s in shapes)
+    assert (0,) in shapes
+    assert any(len(s) == 2 for s in shapes)
+
+
+def test_labels_class_and_ground_truth(tiny: Path) -> None:
+    seq = tiny / "train" / "seq0001"
+    gt_names = sorted(p.name for p in (seq / "ground_truth").iterdir())
+    assert gt_names == sorted(p.name for p in (seq / "class").iterdir())
+    assert len(gt_names) == 60  # 20 Hz x 3 s
+    classes = set()
+    for name in gt_names:
+        gt = np.load(seq / "ground_truth" / name)
+        assert gt.shape == (3,) and gt.dtype == np.float64
+        c = np.load(seq / "class" / name)
+        assert c.ndim == 1 and np.issubdtype(c.dtype, np.integer)
+        classes.add(int(c[0]))
+    assert len(classes) == 1 and classes <= {0, 1, 2, 3}
+
+
+def test_ground_truth_starts_before_first_lidar_frame(tiny: Path) -> None:
+    seq = tiny / "train" / "seq0001"
+    first_gt = _stamps(seq / "ground_truth")[0]
+    first_lidar = _stamps(seq / "lidar_360")[0]
+    assert 30_000_000 <= first_lidar - first_gt <= 40_000_000
+
+
+def test_images_are_valid_pngs(tiny: Path) -> None:
+    path = next(iter((tiny / "val" / "seq0001" / "Image").iterdir()))
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    length, tag = struct.unpack(">I4s", data[8:16])
+    width, height, depth, color = struct.unpack(">IIBB", data[16:26])
+    assert (tag, depth, color) == (b"IHDR", 8, 2)
+    idat_len = struct.unpack(">I", data[33:37])[0]
+    raw = zlib.decompress(data[41 : 41 + idat_len])
+    assert len(raw) == height * (1 + 3 * width)
+
+
+def test_csvs_match_test_ground_truth(tiny: Path) -> None:
+    with (tiny / "test_timestamps.csv").open() as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["Sequence", "Timestamp", "Position", "Classification"]
+    assert len(rows) - 1 == PRESETS["tiny"]["test"][0] * 40  # 20 Hz x 2 s
+    assert all(r[0] == "seq0001" and r[2] == "" and r[3] == "" for r in rows[1:])
+    assert all(re.fullmatch(r"\d{10}\.\d{6}", r[1]) for r in rows[1:])
+    with (tiny / "test_truth.csv").open() as fh:
+        truth = list(csv.reader(fh))
+    assert truth[0] == ["Sequence", "Timestamp", "x", "y", "z", "class"]
+    assert [r[:2] for r in truth[1:]] == [r[:2] for r in rows[1:]]
+    # query stamps are the test GT stamps: 35 ms before the first LiDAR frame, 20 Hz
+    first_lidar = _stamps(tiny / "test" / "seq0001" / "lidar_360")[0]
+    assert 30_000_000 <= first_lidar - parse_stamp(rows[1][1]) <= 40_000_000
+    with (tiny / "val_truth.csv").open() as fh:
+        val = list(csv.reader(fh))
+    assert val[0] == truth[0] and len(val) - 1 == 40
+
+
+def test_clocks(tiny: Path) -> None:
+    seq = tiny / "val" / "seq0001"
+    mid = np.array(_stamps(seq / "lidar_360"))
+    avia = np.array(_stamps(seq / "livox_avia"))
+    radar = np.array(_stamps(seq / "radar_enhance_pcl"))
+    image = np.array(_stamps(seq / "Image"))
+    for stamps in (mid, avia, radar, image):
+        assert (stamps % 1000 == 0).all()  # whole microseconds
+    assert np.abs(np.diff(mid)[np.diff(mid) < 150_000_000] - 100_000_000).max() <= 200_000
+    offset = avia[np.searchsorted(avia, mid)] - mid
+    assert (np.abs(offset - 14_000_000) <= 1_100_000).all()
+    assert abs(np.median(np.diff(radar)) - 66_666_667) < 1_000_000
+    assert abs(np.median(np.diff(image)) - 33_333_333) < 1_000_000
+    assert 1706255000 <= mid[0] // 10**9 < 1706255000 + 600
+    test_mid = _stamps(tiny / "test" / "seq0001" / "lidar_360")
+    assert 1713163000 <= test_mid[0] // 10**9 < 1713163000 + 600
+
+
+def test_merged_frame_exists(tiny: Path) -> None:
+    sizes = [np.load(p).shape[0] for p in (tiny / "train" / "seq0001" / "lidar_360").iterdir()]
+    assert sizes.count(40032) == 1
+    assert len(sizes) == 29  # 30 scans, one lost and merged into the next
+
+
+def test_same_seed_same_bytes_different_seed_differs(tmp_path: Path, tiny: Path) -> None:
+    again = tmp_path / "again"
+    simulate_dataset(again, preset="tiny", seed=3)
+    assert _tree_digest(again) == _tree_digest(tiny)
+    other = tmp_path / "other"
+    simulate_dataset(other, preset="tiny", seed=4)
+    assert _tree_digest(other) != _tree_digest(tiny)
+
+
+def test_existing_output_needs_overwrite(tmp_path: Path) -> None:
+    out = tmp_path / "data"
+    out.mkdir()
+    (out / "keep.txt").write_text("x")
+    with pytest.raises(OutputExistsError, match="data"):
+        simulate_dataset(out, preset="tiny", seed=0)
+    assert (out / "keep.txt").exists()
+    summary = simulate_dataset(out, preset="tiny", seed=0, overwrite=True)
+    assert not (out / "keep.txt").exists()
+    assert (out / "train" / "seq0001").is_dir()
+    assert summary.sequences == (("train", 1), ("val", 1), ("test", 1))
+    assert "3 sequences" in summary.describe()
+    assert [p.name for p in tmp_path.iterdir()] == ["data"]  # no partial folder left
+
+
+def test_bad_arguments_raise_config_errors(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="preset"):
+        simulate_dataset(tmp_path / "x", preset="huge")
+    with pytest.raises(ConfigError, match="scenario"):
+        simulate_sequence(tmp_path / "s", seed=0, duration_s=2, scenario="loop")
+    with pytest.raises(ConfigError, match="duration"):
+        simulate_sequence(tmp_path / "s", seed=0, duration_s=0.2)
+    (tmp_path / "full").mkdir()
+    (tmp_path / "full" / "f").write_text("x")
+    with pytest.raises(OutputExistsError, match="full"):
+        simulate_sequence(tmp_path / "full", seed=0, duration_s=2)
+
+
+def test_progress_reports_one_unit_per_sequence(tmp_path: Path) -> None:
+    class Recorder:
+        def __init__(self) -> None:
+            self.total = 0
+            self.done = 0
+
+        def start(self, total: int, description: str) -> None:
+            self.total = total
+
+        def advance(self, n: int = 1) -> None:
+            self.done += n
+
+    rec = Recorder()
+    simulate_dataset(tmp_path / "d", preset="tiny", seed=1, progress=rec)
+    assert rec.total == rec.done == 3
+
+
+def test_cli_simulate(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(PRESETS, "small", PRESETS["tiny"])  # same code path, fewer seconds
+    out = tmp_path / "cli"
+    runner = CliRunner()
+    result = runner.invoke(app, ["simulate", str(out), "--preset", "small", "--seed", "2"])
+    assert result.exit_code == 0, result.output
+    assert "3 sequences" in result.output
+    assert (out / "test_timestamps.csv").is_file()
+    result = runner.invoke(app, ["simulate", str(out)])
+    assert result.exit_code == 1
+    assert "ERROR" in result.output and str(out) in result.output
+
+
+# --- simulate_sequence and the scenarios ---------------------------------------------------
+
+
+def test_sequence_truth_matches_files(sequences: dict[str, tuple[Path, SequenceTruth]]) -> None:
+    for seq, truth in sequences.values():
+        assert list(truth.lidar_stamps_ns) == _stamps(seq / "lidar_360")
+        assert list(truth.gt_stamps_ns) == _stamps(seq / "ground_truth")
+        assert list(truth.avia_stamps_ns) == _stamps(seq / "livox_avia")
+        assert truth.drone_positions.shape == (len(truth.lidar_stamps_ns), 3)
+        assert truth.mid360_drone_points.shape == truth.lidar_stamps_ns.shape
+        gt = np.array([np.load(p) for p in sorted((seq / "ground_truth").iterdir())])
+        np.testing.assert_allclose(gt, truth.gt_positions)
+        # GT = body centre + prism offset + 5 mm noise: compare at the LiDAR stamps
+        interp = np.column_stack(
+            [np.interp(truth.lidar_stamps_ns, truth.gt_stamps_ns, gt[:, k]) for k in range(3)]
+        )
+        err = interp - PRISM_OFFSET_M - truth.drone_positions
+        assert np.median(np.linalg.norm(err, axis=1)) < 0.1
+
+
+def test_scenario_close_pass_is_seen_close_by_mid360(
+    sequences: dict[str, tuple[Path, SequenceTruth]],
+) -> None:
+    truth = sequences["close_pass"][1]
+    ranges = np.linalg.norm(truth.drone_positions, axis=1)
+    assert ranges.min() < 6.0
+    assert truth.mid360_drone_points.max() >= 10
+
+
+def test_scenario_avia_only_is_seen_only_by_avia(
+    sequences: dict[str, tuple[Path, SequenceTruth]],
+) -> None:
+    truth = sequences["avia_only"][1]
+    p = truth.drone_positions
+    el = np.degrees(np.arcsin(p[:, 2] / np.linalg.norm(p, axis=1)))
+    assert el.min() > 52.0
+    assert truth.mid360_drone_points.sum() == 0
+    assert (truth.avia_drone_points > 0).mean() > 0.3
+
+
+def test_scenario_hover_stays_put(sequences: dict[str, tuple[Path, SequenceTruth]]) -> None:
+    truth = sequences["hover"][1]
+    p = truth.drone_positions
+    steps = np.linalg.norm(np.diff(p, axis=0), axis=1) / 0.1
+    assert np.median(steps) < 0.5  # m/s: hovering most of the time
+    assert np.linalg.norm(p, axis=1).max() < 25
+    assert (truth.mid360_drone_points > 0).mean() > 0.5
+
+
+def test_scenario_distractors(sequences: dict[str, tuple[Path, SequenceTruth]]) -> None:
+    assert "person" in sequences["person"][1].distractors
+    assert "bird" in sequences["bird"][1].distractors
+
+
+def test_flights_are_smooth_and_plausible(sequences: dict[str, tuple[Path, SequenceTruth]]) -> None:
+    for scenario, (_, truth) in sequences.items():
+        p = truth.drone_positions
+        dt = np.diff(truth.lidar_stamps_ns) / 1e9
+        speed = np.linalg.norm(np.diff(p, axis=0), axis=1) / dt
+        assert speed.max() < 9.0, scenario
+        r = np.linalg.norm(p, axis=1)
+        assert r.min() > 1.5 and r.max() < 110, scenario
+
+
+def test_seed_varies_scene_and_flight(tmp_path: Path) -> None:
+    a = simulate_sequence(tmp_path / "a", seed=11, duration_s=2, scenario="mixed", images=False)
+    b = simulate_sequence(tmp_path / "b", seed=12, duration_s=2, scenario="mixed", images=False)
+    assert np.linalg.norm(a.drone_positions[0] - b.drone_positions[0]) > 0.5
+    fa = np.load(sorted((tmp_path / "a" / "lidar_360").iterdir())[0])
+    fb = np.load(sorted((tmp_path / "b" / "lidar_360").iterdir())[0])
+    za = np.percentile(fa[np.any(fa != 0, axis=1)][:, 2], 5)
+    zb = np.percentile(fb[np.any(fb != 0, axis=1)][:, 2], 5)
+    ra = np.median(np.linalg.norm(fa[np.any(fa != 0, axis=1)], axis=1))
+    rb = np.median(np.linalg.norm(fb[np.any(fb != 0, axis=1)], axis=1))
+    assert abs(za - zb) > 0.01 or abs(ra - rb) > 0.5
+    assert not (tmp_path / "a" / "Image").exists()
+
+
+def test_simulate_sequence_is_reproducible(tmp_path: Path) -> None:
+    a = simulate_sequence(tmp_path / "a", seed=[5, 1], duration_s=1.5, scenario="bird")
+    b = simulate_sequence(tmp_path / "b", seed=[5, 1], duration_s=1.5, scenario="bird")
+    assert _tree_digest(tmp_path / "a") == _tree_digest(tmp_path / "b")
+    np.testing.assert_array_equal(a.gt_positions, b.gt_positions)
