@@ -18,6 +18,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 from queue import Empty
@@ -266,9 +267,14 @@ def _drain(queue: Any, progress: Progress) -> None:
 def _run_parallel(
     jobs: list[_Job], workers: int, progress: Progress, record: Callable[[_Outcome], None]
 ) -> None:
-    # forkserver: workers do not inherit the parent's threads (a progress bar's refresh thread).
-    method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
-    ctx = mp.get_context(method)
+    # forkserver: workers do not inherit the parent's threads (a progress bar's refresh thread),
+    # and fork from a server that has imported this module once, so they start in milliseconds.
+    # Like spawn, it imports the caller's __main__ in the workers: scripts need a main guard.
+    if "forkserver" in mp.get_all_start_methods():
+        ctx: Any = mp.get_context("forkserver")
+        ctx.set_forkserver_preload([__name__])
+    else:
+        ctx = mp.get_context("spawn")
     queue = ctx.Queue()
     executor = ProcessPoolExecutor(
         max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(queue,)
@@ -281,6 +287,10 @@ def _run_parallel(
             for future in done:
                 record(future.result())
         _drain(queue, progress)
+    except BrokenProcessPool as err:
+        raise CldetError(
+            f"a conversion worker process died ({err}); was it killed, or out of memory?"
+        ) from err
     finally:
         # On Ctrl-C or an unexpected error: cancel what has not started and wait for the
         # running workers, which remove their temporary files themselves.
