@@ -6,6 +6,7 @@ import io
 import shutil
 import struct
 import subprocess
+import tracemalloc
 import warnings
 import zlib
 from collections.abc import Callable
@@ -20,7 +21,7 @@ from mcap.reader import make_reader
 from typer.testing import CliRunner
 
 import cldet
-from cldet.io import LogWriter, open_log
+from cldet.io import LogReader, LogWriter, list_topics, open_log, read_metadata
 from cldet.io import topics as tp
 from converters import mcap_convert, mmaud
 from converters.mcap_convert import convert_dataset, convert_sequence
@@ -121,7 +122,12 @@ def raw_messages(log: Path, topic: str) -> list:
 
 def check_log(log: Path, seq_dir: Path, *, images: bool = True) -> None:
     """Every channel of ``log`` equals the source folder, bit for bit, with exact stamps."""
-    topics_in_log = open_log(log).list_topics()
+    with open_log(log) as reader:
+        check_log_with(reader, log, seq_dir, images=images)
+
+
+def check_log_with(reader: LogReader, log: Path, seq_dir: Path, *, images: bool) -> None:
+    topics_in_log = reader.list_topics()
     for folder, topic in CLOUD_DIRS.items():
         if not (seq_dir / folder).is_dir():
             assert topic not in topics_in_log
@@ -139,20 +145,20 @@ def check_log(log: Path, seq_dir: Path, *, images: bool = True) -> None:
             assert cloud.pose.HasField("position") and cloud.pose.orientation.w == 1.0
             want = expected_points(path)
             assert cloud.data == want.tobytes(), path  # float32 bit for bit
-        clouds = list(open_log(log).iter_clouds(topic))  # and through cldet's own reader
+        clouds = list(reader.iter_clouds(topic))  # and through cldet's own reader
         for cloud_read, (stamp, path) in zip(clouds, files, strict=True):
             assert cloud_read.stamp_ns == stamp
             want = expected_points(path)
             assert np.ascontiguousarray(cloud_read.points).tobytes() == want.tobytes()
     if (seq_dir / "ground_truth").is_dir():
         files = stamped_files(seq_dir / "ground_truth", ".npy")
-        got = list(open_log(log).iter_positions(tp.GROUND_TRUTH))
+        got = list(reader.iter_positions(tp.GROUND_TRUTH))
         assert [g.stamp_ns for g in got] == [s for s, _ in files]
         for g, (_, path) in zip(got, files, strict=True):
             assert np.array_equal(g.position, np.load(path))
         messages = raw_messages(log, tp.GROUND_TRUTH)
         assert all(m.log_time == m.publish_time for m in messages)
-        labels = list(open_log(log).iter_classes(tp.CLASS))
+        labels = list(reader.iter_classes(tp.CLASS))
         assert [(c.stamp_ns, c.class_id) for c in labels] == [
             (s, int(np.load(p)[0])) for s, p in stamped_files(seq_dir / "class", ".npy")
         ]
@@ -168,7 +174,7 @@ def check_log(log: Path, seq_dir: Path, *, images: bool = True) -> None:
             assert CameraCalibration.FromString(cal.data).frame_id == image.frame_id
     else:
         assert tp.IMAGE not in topics_in_log
-    meta = open_log(log).metadata()[tp.METADATA_SOURCE]
+    meta = reader.metadata()[tp.METADATA_SOURCE]
     assert meta["split"] == seq_dir.parent.name and meta["sequence"] == seq_dir.name
     assert Path(meta["source"]) == seq_dir.resolve()
     assert meta["cldet_version"] == cldet.__version__
@@ -231,7 +237,7 @@ def test_real_sample_round_trips(real_sample: Path, tmp_path: Path) -> None:
     assert report.ok, report.describe()
     log = tmp_path / "val" / "seq0001.mcap"
     check_log(log, real_sample / "val" / "seq0001")
-    counts = open_log(log).list_topics()
+    counts = list_topics(log)
     assert counts == {tp.LIDAR_360: 88, tp.LIVOX_AVIA: 88, tp.RADAR: 132}
     assert report.bytes_out < report.bytes_in / 10  # valid float32 rows only, compressed
 
@@ -247,12 +253,34 @@ def test_simulated_sequence_round_trips(tmp_path: Path) -> None:
     check_log(tmp_path / "logs" / "train" / "seq0007.mcap", seq_dir)
 
 
+def test_memory_stays_flat_with_sequence_length(tmp_path: Path) -> None:
+    """Peak Python/numpy memory of a conversion does not grow with the number of frames."""
+    rng = np.random.default_rng(3)
+    peaks = []
+    for n_frames in (8, 32):
+        seq_dir = tmp_path / f"n{n_frames}" / "val" / "seq0001"
+        (seq_dir / "lidar_360").mkdir(parents=True)
+        for name in stamp_names(1_706_255_621, n_frames, 100_000):
+            frame = np.zeros((20064, 3))
+            frame[::5] = rng.normal(0, 20, (4013, 3))
+            np.save(seq_dir / "lidar_360" / f"{name}.npy", frame)
+        (seq,) = mmaud.find_sequences(seq_dir.parent.parent)
+        with open(tmp_path / f"n{n_frames}.mcap", "wb") as stream:
+            tracemalloc.start()
+            with LogWriter(stream, chunk_size=1 << 17) as writer:  # both runs fill chunks
+                convert_sequence(seq, writer)
+            peaks.append(tracemalloc.get_traced_memory()[1])
+            tracemalloc.stop()
+    # 32 frames of 481 kB (15 MB of input) need no more memory than 8 frames (4 MB)
+    assert peaks[1] < 1.2 * peaks[0], peaks
+
+
 def test_no_images(tiny: Path, tmp_path: Path) -> None:
     report = convert_dataset(tiny, tmp_path / "logs", splits=["train"], workers=1, images=False)
     assert report.ok
     log = tmp_path / "logs" / "train" / "seq0001.mcap"
     check_log(log, tiny / "train" / "seq0001", images=False)
-    assert "count.Image" not in open_log(log).metadata()[tp.METADATA_SOURCE]
+    assert "count.Image" not in read_metadata(log)[tp.METADATA_SOURCE]
 
 
 def test_rerun_imports_the_converted_log_as_points3d(tiny: Path, tmp_path: Path) -> None:
