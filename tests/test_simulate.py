@@ -358,3 +358,55 @@ def test_simulate_sequence_is_reproducible(tmp_path: Path) -> None:
     b = simulate_sequence(tmp_path / "b", seed=[5, 1], duration_s=1.5, scenario="bird")
     assert _tree_digest(tmp_path / "a") == _tree_digest(tmp_path / "b")
     np.testing.assert_array_equal(a.gt_positions, b.gt_positions)
+
+
+def _projected_area(size: tuple[float, float, float], direction: np.ndarray, yaw: float) -> float:
+    """Projected area (m^2) of a box of ``size`` (L, W, H) rotated by ``yaw``, seen along ``direction``."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    ax = np.array([c, s, 0.0])
+    ay = np.array([-s, c, 0.0])
+    az = np.array([0.0, 0.0, 1.0])
+    length, width, height = size
+    return float(
+        abs(direction @ ax) * width * height
+        + abs(direction @ ay) * length * height
+        + abs(direction @ az) * length * width
+    )
+
+
+def test_drone_point_count_follows_area_over_range_squared(
+    sequences: dict[str, tuple[Path, SequenceTruth]],
+) -> None:
+    """Mid-360 points on the drone ~ 3000 * A / r^2 (within a factor 2 in the median, r < 10 m).
+
+    A is bounded using the box's largest and smallest projected area over yaw.
+    """
+    from cldet.simulate import DRONE_TYPES
+
+    ratios = []
+    for _, truth in sequences.values():
+        size = DRONE_TYPES[truth.class_id].size_m
+        for p, n in zip(truth.drone_positions, truth.mid360_drone_points, strict=True):
+            r = float(np.linalg.norm(p))
+            if r > 10.0:
+                continue
+            d = p / r
+            areas = [_projected_area(size, d, y) for y in np.linspace(0, np.pi, 7)]
+            expected = 3000 * float(np.mean(areas)) / r**2
+            if expected > 3:
+                ratios.append(n / expected)
+    assert len(ratios) > 20
+    assert 0.5 < np.median(ratios) < 2.0
+
+
+def test_drone_points_sit_on_the_near_face(
+    sequences: dict[str, tuple[Path, SequenceTruth]],
+) -> None:
+    """A LiDAR sees the sensor-facing side: point centroids are nearer than the body centre."""
+    truth = sequences["close_pass"][1]
+    seen = truth.mid360_drone_points >= 5
+    assert seen.sum() > 5
+    r_points = np.linalg.norm(truth.mid360_drone_centroids[seen], axis=1)
+    r_body = np.linalg.norm(truth.drone_positions[seen], axis=1)
+    bias = r_body - r_points
+    assert 0.02 < np.median(bias) < 0.5

@@ -80,6 +80,7 @@ class SequenceTruth:
     lidar_stamps_ns: I64  # (N,) stamps of the Mid-360 files written (a merged frame counts once)
     drone_positions: F64  # (N, 3) body centre at the Mid-360 stamps
     mid360_drone_points: I64  # (N,) Mid-360 points on the drone per file
+    mid360_drone_centroids: F64  # (N, 3) mean of those points (NaN when none): the near-face bias
     avia_stamps_ns: I64  # (M,) stamps of the Avia files
     avia_drone_points: I64  # (M,) Avia points on the drone per file
     distractors: tuple[str, ...]  # movers other than the drone ("person", "bird")
@@ -251,20 +252,25 @@ def _simulate_sequence(
     mid_points: list[int] = []
     pending: NDArray[np.float64] | None = None
     pending_points = 0
+    pending_sum = np.zeros(3)
+    mid_sums: list[F64] = []
     for k in range(n_lidar):
         frame = mid360_frame(rng, rows[k], rel_s(mid_ns[k]), scene, movers)
         if k == lost:
-            pending, pending_points = frame.points, frame.drone_points
+            pending, pending_points, pending_sum = frame.points, frame.drone_points, frame.drone_sum
             continue
         points = frame.points
         n_drone = frame.drone_points
+        drone_sum = frame.drone_sum
         if pending is not None:
             points = np.concatenate([pending, points])
             n_drone += pending_points
+            drone_sum = drone_sum + pending_sum
             pending = None
         _save_npy(seq_dir / "lidar_360" / f"{format_stamp(int(mid_ns[k]))}.npy", points)
         written_mid.append(int(mid_ns[k]))
         mid_points.append(n_drone)
+        mid_sums.append(drone_sum)
 
     clutter = avia_clutter_states(rng, n_lidar)
     avia_points: list[int] = []
@@ -291,6 +297,10 @@ def _simulate_sequence(
             _save_npy(seq_dir / "class" / name, cls_array)
 
     lidar_ns = np.array(written_mid, dtype=np.int64)
+    counts = np.array(mid_points, dtype=np.int64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        centroids = np.array(mid_sums).reshape(-1, 3) / counts[:, None]
+    centroids[counts == 0] = np.nan
     return SequenceTruth(
         scenario=scenario,
         class_id=cls,
@@ -298,7 +308,8 @@ def _simulate_sequence(
         gt_positions=gt_pos,
         lidar_stamps_ns=lidar_ns,
         drone_positions=track.at((lidar_ns - t0_ns) / 1e9),
-        mid360_drone_points=np.array(mid_points, dtype=np.int64),
+        mid360_drone_points=counts,
+        mid360_drone_centroids=centroids,
         avia_stamps_ns=avia_ns.astype(np.int64),
         avia_drone_points=np.array(avia_points, dtype=np.int64),
         distractors=tuple(m.name for m in movers[1:]),

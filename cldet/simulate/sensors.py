@@ -30,7 +30,7 @@ MID360_ELEVATION_DEG = (-7.0, 52.0)
 AVIA_MIN_ELEVATION_DEG = 52.0
 RANGE_NOISE_M = 0.02
 FADE_START_M = 70.0
-AVIA_DENSITY_SCALE = 0.8  # Avia per-ray return probability relative to the Mid-360 (~4.7x denser)
+AVIA_DENSITY_SCALE = 0.85  # Avia per-ray return probability relative to the Mid-360 (~4.7x denser)
 _SECTORS = 17  # azimuth sectors the Mid-360 sweeps up and down within one scan
 
 
@@ -40,6 +40,7 @@ class ScanResult:
 
     points: F64  # (rows, 3) float64 with zero rows where no return; metres
     drone_points: int  # how many valid rows are on the drone
+    drone_sum: F64  # (3,) sum of the drone's points (metres), for centroids
 
 
 def mid360_directions(rng: np.random.Generator, rows: int) -> F64:
@@ -167,7 +168,9 @@ def mid360_frame(
     """One Mid-360 frame: ``rows`` rows, plus 0-4 lone speckle points and 1-3 self-returns."""
     dirs = mid360_directions(rng, rows)
     points, valid, kind = scan(dirs, stamp_s, scene, movers, rng)
-    drone = int(np.count_nonzero(valid & (kind == DRONE)))
+    on_drone = valid & (kind == DRONE)
+    drone = int(np.count_nonzero(on_drone))
+    drone_sum = points[on_drone].sum(axis=0)
     empty = np.flatnonzero(~valid)
     n_speckle = int(rng.integers(0, 5))
     n_self = int(rng.integers(1, 4))
@@ -175,7 +178,7 @@ def mid360_frame(
         pick = rng.choice(empty, n_speckle + n_self, replace=False)
         ranges = np.concatenate([rng.uniform(1.0, 60.0, n_speckle), rng.uniform(0.03, 0.1, n_self)])
         points[pick] = _to_points(dirs[pick], ranges).astype(np.float64)
-    return ScanResult(points, drone)
+    return ScanResult(points, drone, drone_sum)
 
 
 def avia_frame(
@@ -188,7 +191,9 @@ def avia_frame(
     """One Avia frame: 24000 rows looking up; ``clutter`` adds 1-10 sporadic (mostly far) returns."""
     dirs = avia_directions(rng)
     points, valid, kind = scan(dirs, stamp_s, scene, movers, rng, AVIA_DENSITY_SCALE)
-    drone = int(np.count_nonzero(valid & (kind == DRONE)))
+    on_drone = valid & (kind == DRONE)
+    drone = int(np.count_nonzero(on_drone))
+    drone_sum = points[on_drone].sum(axis=0)
     if clutter:
         n = min(int(rng.geometric(0.35)), 10)
         empty = np.flatnonzero(~valid)
@@ -199,7 +204,7 @@ def avia_frame(
         valid[pick] = True
     out = points
     out[~valid] = np.array([-0.0, -0.0, 0.0])
-    return ScanResult(out, drone)
+    return ScanResult(out, drone, drone_sum)
 
 
 def avia_clutter_states(rng: np.random.Generator, n: int) -> NDArray[np.bool_]:
