@@ -71,6 +71,8 @@ class Cluster:
     lower: NDArray[np.float64]  # (3,) axis-aligned box min, metres
     upper: NDArray[np.float64]  # (3,) axis-aligned box max, metres
     n_points: int
+    n_mid360: int = 0  # of which from the Mid-360
+    n_avia: int = 0  # of which from the Avia
 
 
 @dataclass(frozen=True)

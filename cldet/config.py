@@ -1,0 +1,243 @@
+"""Configuration of the estimator: pydantic sections in one root model, defaults in code, optional YAML.
+
+Every section forbids unknown keys (a misspelt key is an error, not a silently ignored value) and
+is frozen. ``load_config`` reads a YAML file and/or a nested dict of overrides; ``config_to_dict``
+gives the effective configuration as plain JSON-able data, stored with every output.
+Lengths are metres (``*_m``), durations seconds (``*_s``), speeds m/s.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from cldet.errors import ConfigError
+
+__all__ = [
+    "BackgroundConfig",
+    "BiasConfig",
+    "CldetConfig",
+    "ClusteringConfig",
+    "FramesConfig",
+    "SmoothingConfig",
+    "TrackingConfig",
+    "config_to_dict",
+    "load_config",
+]
+
+_STRICT = ConfigDict(extra="forbid", frozen=True)
+
+
+class FramesConfig(BaseModel):
+    """Pairing of the two LiDARs and point filtering."""
+
+    model_config = _STRICT
+
+    max_gap_s: float = Field(
+        default=0.05, gt=0, description="max |Avia - Mid-360| stamp gap to pair"
+    )
+    min_range_m: float = Field(default=0.3, ge=0, description="drop self-returns nearer than this")
+    max_range_m: float = Field(default=150.0, gt=0, description="drop returns farther than this")
+
+
+class BackgroundConfig(BaseModel):
+    """Static range image learned over the whole sequence (see ``cldet.core.background``)."""
+
+    model_config = _STRICT
+
+    cell_deg: float = Field(
+        default=2.0, gt=0, le=30, description="direction cell, azimuth and elevation"
+    )
+    bin_s: float = Field(default=1.0, gt=0, description="time bin: a cell's nearest range per bin")
+    min_bin_fraction: float = Field(
+        default=0.85,
+        gt=0,
+        le=1,
+        description="static = reached in at least this fraction of time bins",
+    )
+    dilate_cells: int = Field(
+        default=1, ge=0, le=3, description="grow the static range by this many cells"
+    )
+    margin_m: float = Field(
+        default=0.3, ge=0, description="foreground = nearer than static by more than"
+    )
+    margin_fraction: float = Field(
+        default=0.03, ge=0, lt=1, description="... or this fraction of range"
+    )
+    recent_memory_s: float = Field(
+        default=2.0, ge=0, description="keep raw points near clusters of the last this many seconds"
+    )
+    recent_cell_m: float = Field(
+        default=2.0, gt=0, description="cell of that memory (about its radius)"
+    )
+    recent_extent_m: float = Field(
+        default=40.0, gt=0, description="the memory covers |x|,|y|,|z| < this"
+    )
+
+
+class ClusteringConfig(BaseModel):
+    """Exact DBSCAN over the foreground points of one frame."""
+
+    model_config = _STRICT
+
+    eps_m: float = Field(default=1.0, gt=0, description="neighbourhood radius")
+    min_samples: int = Field(
+        default=1, ge=1, description="core point: at least this many within eps"
+    )
+    max_points: int = Field(
+        default=20000, ge=1, description="foreground points beyond this (nearest first) are dropped"
+    )
+
+
+class TrackingConfig(BaseModel):
+    """Candidate tracks (constant-velocity Kalman), their whole-sequence score and the chain."""
+
+    model_config = _STRICT
+
+    accel_psd: float = Field(default=4.0, gt=0, description="white-acceleration PSD q, m^2/s^3")
+    meas_sigma_m: float = Field(default=0.12, gt=0, description="centroid noise, 1 sigma")
+    raw_meas_sigma_m: float = Field(default=0.25, gt=0, description="noise of a raw-gate detection")
+    init_speed_sigma: float = Field(
+        default=5.0, gt=0, description="speed uncertainty at track start, m/s"
+    )
+    gate_chi2: float = Field(default=16.0, gt=0, description="Mahalanobis gate (3 dof)")
+    max_gate_m: float = Field(default=3.0, gt=0, description="hard Euclidean gate")
+    max_miss_s: float = Field(
+        default=1.5, gt=0, description="a candidate track ends after this unseen"
+    )
+    min_speed: float = Field(
+        default=0.3, ge=0, description="below: not moving (static clutter or hover)"
+    )
+    max_speed: float = Field(default=15.0, gt=0, description="above: not a drone")
+    max_size_m: float = Field(
+        default=1.2, gt=0, description="clusters larger than this are not a drone"
+    )
+    min_height_m: float = Field(
+        default=1.0, description="centroids lower than this above ground: unlikely"
+    )
+    ground_z_m: float | None = Field(
+        default=None, description="ground height; None = learn from background"
+    )
+    link_max_gap_s: float = Field(
+        default=8.0, gt=0, description="longest unseen gap bridged between tracks"
+    )
+    link_speed: float = Field(default=10.0, gt=0, description="max mean speed across a bridged gap")
+    raw_gate_m: float = Field(
+        default=0.6, ge=0, description="raw-point search radius around a prediction"
+    )
+    fallback_position: tuple[float, float, float] = Field(
+        default=(0.734, -9.739, 33.353), description="used only when no track exists at all"
+    )
+
+
+class SmoothingConfig(BaseModel):
+    """Offline forward-backward (Rauch-Tung-Striebel) smoother over the chosen track."""
+
+    model_config = _STRICT
+
+    enabled: bool = True
+    accel_psd: float = Field(
+        default=2.0, gt=0, description="white-acceleration PSD of the smoother"
+    )
+    max_extrapolation_s: float = Field(
+        default=1.0, ge=0, description="beyond this from a detection, hold the velocity no longer"
+    )
+
+
+class BiasConfig(BaseModel):
+    """Correction of cluster centroids (LiDAR sees the near face; GT prism sits above the body)."""
+
+    model_config = _STRICT
+
+    along_ray_m: float = Field(
+        default=0.0, description="push centroids away from the sensor by this"
+    )
+    z_m: float = Field(default=0.0, description="add this to z")
+
+
+class CldetConfig(BaseModel):
+    """The whole estimator configuration."""
+
+    model_config = _STRICT
+
+    method: Literal["track", "cl-det"] = "track"
+    frames: FramesConfig = Field(default_factory=FramesConfig)
+    background: BackgroundConfig = Field(default_factory=BackgroundConfig)
+    clustering: ClusteringConfig = Field(default_factory=ClusteringConfig)
+    tracking: TrackingConfig = Field(default_factory=TrackingConfig)
+    smoothing: SmoothingConfig = Field(default_factory=SmoothingConfig)
+    bias: BiasConfig = Field(default_factory=BiasConfig)
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    """Deep-merge ``over`` into a copy of ``base``."""
+    out = dict(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def _describe(err: ValidationError) -> str:
+    """One line per problem: the dotted key, the bad value and what was expected."""
+    lines = []
+    for item in err.errors():
+        key = ".".join(str(p) for p in item["loc"]) or "<root>"
+        if item["type"] == "extra_forbidden":
+            lines.append(f"unknown key {key!r}")
+        else:
+            lines.append(f"{key} = {item.get('input')!r}: {item['msg']}")
+    return "; ".join(lines)
+
+
+def load_config(path: Path | None = None, overrides: dict[str, Any] | None = None) -> CldetConfig:
+    """Build the configuration: defaults, then the YAML file, then ``overrides`` (nested dict).
+
+    Args:
+        path: optional YAML file holding a (partial) nested mapping of the sections.
+        overrides: optional nested mapping applied last, e.g. ``{"method": "cl-det"}``.
+
+    Returns:
+        The validated, frozen configuration.
+
+    Raises:
+        ConfigError: the file is missing or not YAML, or a key/value is invalid (the message
+            names the file and the key).
+    """
+    data: dict[str, Any] = {}
+    where = "overrides"
+    if path is not None:
+        where = str(path)
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except OSError as err:
+            raise ConfigError(f"cannot read config file {path}: {err}") from err
+        try:
+            loaded = yaml.safe_load(text)
+        except yaml.YAMLError as err:
+            raise ConfigError(f"config file {path} is not valid YAML: {err}") from err
+        if loaded is None:
+            loaded = {}
+        if not isinstance(loaded, dict):
+            raise ConfigError(
+                f"config file {path} must hold a mapping of sections, got {type(loaded).__name__}"
+            )
+        data = loaded
+    if overrides:
+        data = _merge(data, overrides)
+        if path is not None:
+            where = f"{path} (with overrides)"
+    try:
+        return CldetConfig.model_validate(data)
+    except ValidationError as err:
+        raise ConfigError(f"invalid configuration in {where}: {_describe(err)}") from err
+
+
+def config_to_dict(cfg: CldetConfig) -> dict[str, Any]:
+    """The effective configuration as JSON-able nested dicts (tuples become lists)."""
+    return cfg.model_dump(mode="json")

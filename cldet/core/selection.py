@@ -1,0 +1,150 @@
+"""Which candidate track is the drone: whole-sequence evidence, then a chain through gaps.
+
+Each candidate track (``cldet.core.tracking``) is scored over the whole sequence; one frame's
+largest cluster never decides. The score is a sum over the track's detections (persistence),
+each detection weighted by per-detection evidence and the track's factors:
+
+* size: a detection whose cluster box is larger than ``max_size_m`` (1.2 m; the largest
+  drones are ~0.8 m) weighs 0.1 (a person, a car, a branch);
+* height: factor 0.1 + 0.9 f, f = fraction of detections at least ``min_height_m`` above the
+  ground (a walking person's centroid is ~0.9 m up; the drone flies);
+* speed: factor 0.1 when the track's 90th-percentile filtered speed exceeds ``max_speed``
+  (15 m/s); factor 0.5 when its median speed stays under ``min_speed`` (0.3 m/s) and it never
+  moved more than 1 m: static clutter, or a hovering drone (kept, but a mover wins ties);
+* motion consistency: factor min(1, 2 / mean NIS per axis): smooth constant-velocity motion
+  gives ~1, erratic speckle or a bird's jinks give more;
+* sensors: factor 1 + 0.5 f, f = fraction of detections seen by both LiDARs in one cluster.
+
+Tracks of a single detection are not candidates. The drone's record is often several tracks
+(long unseen stretches, a detection stolen by clutter). A chain is the sequence of tracks
+maximising the summed scores, where track A links to a later-starting track B if the jump
+from A's last detection before B starts to B's first is at most
+``link_speed * gap + 1 m`` within ``link_max_gap_s``; A then counts only up to B's start, and
+each link costs 2 detections' worth. This is a dynamic programme over tracks sorted by start.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cldet.config import TrackingConfig
+from cldet.core.tracking import ClusterTable, TrackRecord
+
+__all__ = ["ScoredTrack", "score_tracks", "select_chain"]
+
+_LINK_COST = 2.0
+
+
+@dataclass(frozen=True)
+class ScoredTrack:
+    """A candidate track with its per-detection contributions to the score."""
+
+    record: TrackRecord
+    times_s: NDArray[np.float64]  # (H,) detection times, s
+    positions: NDArray[np.float64]  # (H,3) cluster centroids, metres
+    contribution: NDArray[np.float64]  # (H,) each detection's weight in the score
+    score: float
+
+
+def score_tracks(
+    records: list[TrackRecord],
+    tables: list[ClusterTable],
+    times_s: NDArray[np.float64],
+    ground_z: float,
+    cfg: TrackingConfig,
+) -> list[ScoredTrack]:
+    """Score every candidate track of two detections or more (see the module docstring)."""
+    out = []
+    for rec in records:
+        h = len(rec.frames)
+        if h < 2:
+            continue
+        pos = np.array(
+            [tables[f].centroid[c] for f, c in zip(rec.frames, rec.clusters, strict=True)]
+        )
+        extent = np.array(
+            [tables[f].extent[c] for f, c in zip(rec.frames, rec.clusters, strict=True)]
+        )
+        both = np.array(
+            [
+                tables[f].n_mid360[c] > 0 and tables[f].n_avia[c] > 0
+                for f, c in zip(rec.frames, rec.clusters, strict=True)
+            ]
+        )
+        per_det = np.where(extent <= cfg.max_size_m, 1.0, 0.1)
+        high = np.mean(pos[:, 2] - ground_z >= cfg.min_height_m)
+        factor = 0.1 + 0.9 * high
+        speeds = rec.speed[2:] if h > 3 else rec.speed[1:]
+        if len(speeds) and np.percentile(speeds, 90) > cfg.max_speed:
+            factor *= 0.1
+        moved = float(np.max(np.ptp(pos, axis=0)))
+        if (not len(speeds) or np.median(speeds) < cfg.min_speed) and moved < 1.0:
+            factor *= 0.5
+        nis = rec.nis[np.isfinite(rec.nis)]
+        if len(nis) >= 2:
+            factor *= min(1.0, 2.0 / max(float(np.mean(nis)) / 3.0, 1e-9))
+        factor *= 1.0 + 0.5 * float(np.mean(both))
+        contribution = per_det * factor
+        out.append(
+            ScoredTrack(
+                record=rec,
+                times_s=times_s[rec.frames],
+                positions=pos,
+                contribution=contribution,
+                score=float(contribution.sum()),
+            )
+        )
+    return out
+
+
+def select_chain(
+    tracks: list[ScoredTrack], cfg: TrackingConfig
+) -> list[tuple[ScoredTrack, int, int]]:
+    """The best chain of tracks: a list of (track, first hit index, end hit index exclusive).
+
+    Empty when there is no candidate track.
+    """
+    if not tracks:
+        return []
+    order = sorted(
+        range(len(tracks)), key=lambda i: (tracks[i].times_s[0], tracks[i].record.track_id)
+    )
+    trs = [tracks[i] for i in order]
+    starts = np.array([t.times_s[0] for t in trs])
+    ends = np.array([t.times_s[-1] for t in trs])
+    cum = [np.concatenate([[0.0], np.cumsum(t.contribution)]) for t in trs]
+    best_in = np.zeros(len(trs))
+    parent = np.full(len(trs), -1)
+    parent_cut = np.zeros(len(trs), dtype=np.int64)  # hits of the parent kept
+    for b, tb in enumerate(trs):
+        t0, p0 = starts[b], tb.positions[0]
+        for a in range(b):
+            if starts[a] >= t0 or ends[a] < t0 - cfg.link_max_gap_s:
+                continue
+            ta = trs[a]
+            cut = int(np.searchsorted(ta.times_s, t0, side="left"))  # hits strictly before t0
+            if cut == 0:
+                continue
+            gap = t0 - ta.times_s[cut - 1]
+            if gap > cfg.link_max_gap_s:
+                continue
+            if np.linalg.norm(p0 - ta.positions[cut - 1]) > cfg.link_speed * gap + 1.0:
+                continue
+            value = best_in[a] + cum[a][cut] - _LINK_COST
+            if value > best_in[b]:
+                best_in[b] = value
+                parent[b] = a
+                parent_cut[b] = cut
+    total = best_in + np.array([c[-1] for c in cum])
+    b = int(np.argmax(total))
+    chain: list[tuple[ScoredTrack, int, int]] = []
+    end = len(trs[b].times_s)
+    while b >= 0:
+        chain.append((trs[b], 0, end))
+        end = int(parent_cut[b])
+        b = int(parent[b])
+    chain.reverse()
+    return chain

@@ -1,0 +1,151 @@
+"""Constant-velocity Kalman filter and Rauch-Tung-Striebel smoother for one 3D track.
+
+The motion model is constant velocity driven by white acceleration of power spectral density
+``q`` (m^2/s^3), the same on x, y and z, and measurements are isotropic 3D positions. With the
+same model on every axis and isotropic noise, the three axes share one 2x2 covariance
+(position, velocity) and never correlate, so a track is a (3,2) state [position, velocity per
+axis] and a single 2x2 covariance: cheap, and exact for this model.
+
+Times are seconds here (relative to any origin); the estimator converts from integer ns.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["KalmanCV", "SmoothedTrack", "process_noise", "rts_smooth", "transition"]
+
+
+def transition(dt: float) -> NDArray[np.float64]:
+    """(2,2) constant-velocity transition over ``dt`` seconds."""
+    return np.array([[1.0, dt], [0.0, 1.0]])
+
+
+def process_noise(dt: float, q: float) -> NDArray[np.float64]:
+    """(2,2) process noise of white acceleration with PSD ``q`` over ``dt`` seconds."""
+    dt = abs(dt)
+    return q * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
+
+
+class KalmanCV:
+    """One constant-velocity track: state (3,2) [position, velocity] per axis, covariance (2,2)."""
+
+    def __init__(
+        self, position: NDArray[np.floating], pos_sigma: float, speed_sigma: float
+    ) -> None:
+        self.x = np.zeros((3, 2))
+        self.x[:, 0] = position
+        self.P = np.diag([pos_sigma**2, speed_sigma**2])
+
+    def predict(self, dt: float, q: float) -> None:
+        """Advance by ``dt`` seconds (may be negative: a backward prediction)."""
+        F = transition(dt)
+        self.x = self.x @ F.T
+        self.P = F @ self.P @ F.T + process_noise(dt, q)
+
+    def innovation(
+        self, z: NDArray[np.floating], sigma: float
+    ) -> tuple[NDArray[np.float64], float]:
+        """Innovation (3,) of a position ``z`` and its per-axis variance S."""
+        return np.asarray(z, dtype=np.float64) - self.x[:, 0], float(self.P[0, 0] + sigma**2)
+
+    def nis(self, z: NDArray[np.floating], sigma: float) -> float:
+        """Normalised innovation squared (chi^2 with 3 dof under the model)."""
+        nu, s = self.innovation(z, sigma)
+        return float(nu @ nu / s)
+
+    def update(self, z: NDArray[np.floating], sigma: float) -> float:
+        """Fuse a position measurement of 1-sigma ``sigma``; returns its NIS."""
+        nu, s = self.innovation(z, sigma)
+        gain = self.P[:, 0] / s  # (2,)
+        self.x = self.x + np.outer(nu, gain)
+        self.P = self.P - np.outer(gain, self.P[0, :])
+        self.P = 0.5 * (self.P + self.P.T)
+        return float(nu @ nu / s)
+
+    @property
+    def position(self) -> NDArray[np.float64]:
+        return self.x[:, 0].copy()
+
+    @property
+    def velocity(self) -> NDArray[np.float64]:
+        return self.x[:, 1].copy()
+
+
+@dataclass(frozen=True)
+class SmoothedTrack:
+    """Result of the forward-backward smoother at every input time."""
+
+    position: NDArray[np.float64]  # (T,3) metres
+    velocity: NDArray[np.float64]  # (T,3) m/s
+    pos_var: NDArray[np.float64]  # (T,) per-axis position variance, m^2
+    cov: NDArray[np.float64]  # (T,2,2) per-axis [position, velocity] covariance
+    measured: NDArray[np.bool_]  # (T,) a measurement was fused at this time
+
+
+def rts_smooth(
+    t_s: NDArray[np.floating],
+    z: NDArray[np.floating],
+    sigma: NDArray[np.floating],
+    q: float,
+    init_speed_sigma: float = 5.0,
+) -> SmoothedTrack:
+    """Kalman filter forward, Rauch-Tung-Striebel backward, over times ``t_s`` (T,) seconds.
+
+    Args:
+        t_s: increasing times, seconds.
+        z: (T,3) measured positions; rows with NaN are missing (the filter only predicts).
+        sigma: (T,) 1-sigma of each measurement, metres.
+        q: white-acceleration PSD, m^2/s^3.
+        init_speed_sigma: prior speed uncertainty at the first measurement, m/s.
+
+    Returns:
+        Smoothed positions, velocities and per-axis variances at every ``t_s``. Times before
+        the first measurement are extrapolated backwards by the smoother itself.
+
+    Raises:
+        ValueError: no measurement at all, or shapes disagree.
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    zz = np.asarray(z, dtype=np.float64)
+    n = len(t)
+    if zz.shape != (n, 3) or len(sigma) != n:
+        raise ValueError(f"shapes disagree: t {t.shape}, z {zz.shape}, sigma {np.shape(sigma)}")
+    have = np.all(np.isfinite(zz), axis=1)
+    if not have.any():
+        raise ValueError("rts_smooth needs at least one measurement")
+    first = int(np.argmax(have))
+    xf = np.zeros((n, 3, 2))
+    Pf = np.zeros((n, 2, 2))
+    xp = np.zeros((n, 3, 2))
+    Pp = np.zeros((n, 2, 2))
+    kf = KalmanCV(zz[first], float(sigma[first]), init_speed_sigma)
+    xp[first], Pp[first] = kf.x, kf.P
+    xf[first], Pf[first] = kf.x, kf.P
+    for k in range(first + 1, n):
+        kf.predict(t[k] - t[k - 1], q)
+        xp[k], Pp[k] = kf.x, kf.P
+        if have[k]:
+            kf.update(zz[k], float(sigma[k]))
+        xf[k], Pf[k] = kf.x, kf.P
+    xs = xf.copy()
+    Ps = Pf.copy()
+    for k in range(n - 2, first - 1, -1):
+        F = transition(t[k + 1] - t[k])
+        C = Pf[k] @ F.T @ np.linalg.inv(Pp[k + 1])
+        xs[k] = xf[k] + (xs[k + 1] - xp[k + 1]) @ C.T
+        Ps[k] = Pf[k] + C @ (Ps[k + 1] - Pp[k + 1]) @ C.T
+    for k in range(first - 1, -1, -1):  # before the first measurement: predict backwards
+        F = transition(t[k] - t[k + 1])
+        xs[k] = xs[k + 1] @ F.T
+        Ps[k] = F @ Ps[k + 1] @ F.T + process_noise(t[k + 1] - t[k], q)
+    return SmoothedTrack(
+        position=xs[:, :, 0].copy(),
+        velocity=xs[:, :, 1].copy(),
+        pos_var=Ps[:, 0, 0].copy(),
+        cov=Ps,
+        measured=have,
+    )
