@@ -55,6 +55,7 @@ class ConvertReport:
     bytes_in: int  # size of the source files converted
     bytes_out: int  # size of the logs written
     seconds: float  # wall time
+    cpu_seconds: float = 0.0  # CPU time spent converting, summed over the worker processes
 
     @property
     def ok(self) -> bool:
@@ -167,6 +168,7 @@ class _Outcome:
     bytes_in: int = 0
     bytes_out: int = 0
     error: str | None = None
+    cpu_seconds: float = 0.0
 
 
 def _source_bytes(seq: mmaud.SequenceRef, modalities: Sequence[str]) -> int:
@@ -179,6 +181,7 @@ def _source_bytes(seq: mmaud.SequenceRef, modalities: Sequence[str]) -> int:
 
 def _run_job(job: _Job, progress: Progress) -> _Outcome:
     """Convert one sequence into ``job.target`` atomically; a DatasetError becomes a failure."""
+    cpu_started = time.process_time()
     try:
         with (
             atomic_output(job.target, overwrite=job.overwrite) as stream,
@@ -186,7 +189,13 @@ def _run_job(job: _Job, progress: Progress) -> _Outcome:
         ):
             counts = convert_sequence(job.seq, writer, images=job.images, progress=progress)
         bytes_in = _source_bytes(job.seq, _modalities(job.seq, job.images))
-        return _Outcome(job, sum(counts.values()), bytes_in, job.target.stat().st_size)
+        return _Outcome(
+            job,
+            frames=sum(counts.values()),
+            bytes_in=bytes_in,
+            bytes_out=job.target.stat().st_size,
+            cpu_seconds=time.process_time() - cpu_started,
+        )
     except CldetError as err:
         return _Outcome(job, error=str(err))
     except OSError as err:  # disk full, permissions: name the file
@@ -244,8 +253,10 @@ class _Tally:
     frames: int = 0
     bytes_in: int = 0
     bytes_out: int = 0
+    cpu_seconds: float = 0.0
 
     def add(self, outcome: _Outcome) -> None:
+        self.cpu_seconds += outcome.cpu_seconds
         if outcome.error is not None:
             seq = outcome.job.seq
             self.failed.append(ConvertFailure(f"{seq.split}/{seq.name}", outcome.error))
@@ -379,4 +390,5 @@ def convert_dataset(
         bytes_in=tally.bytes_in,
         bytes_out=tally.bytes_out,
         seconds=time.perf_counter() - started,
+        cpu_seconds=tally.cpu_seconds,
     )
