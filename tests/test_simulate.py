@@ -320,6 +320,14 @@ def test_scenario_hover_stays_put(sequences: dict[str, tuple[Path, SequenceTruth
     p = truth.drone_positions
     steps = np.linalg.norm(np.diff(p, axis=0), axis=1) / 0.1
     assert np.median(steps) < 0.5  # m/s: hovering most of the time
+    assert truth.hover_anchor is not None
+    above = p - truth.hover_anchor
+    hovering = steps < 0.3
+    assert hovering.mean() > 0.5
+    # ~1 m above the static object's top (plus the drone's half height and wobble)
+    h = above[1:][hovering]
+    assert np.all(np.hypot(h[:, 0], h[:, 1]) < 0.5)
+    assert 0.6 < np.median(h[:, 2]) < 1.5
     assert np.linalg.norm(p, axis=1).max() < 25
     assert (truth.mid360_drone_points > 0).mean() > 0.5
 
@@ -410,3 +418,20 @@ def test_drone_points_sit_on_the_near_face(
     r_body = np.linalg.norm(truth.drone_positions[seen], axis=1)
     bias = r_body - r_points
     assert 0.02 < np.median(bias) < 0.5
+
+
+def test_avia_is_about_4_7_times_denser(sequences: dict[str, tuple[Path, SequenceTruth]]) -> None:
+    """Avia points on the drone ~ 4.7 * 3000 * A / r^2 (aggregate within a factor 2) in the cone."""
+    from cldet.simulate import DRONE_TYPES
+
+    _, truth = sequences["avia_only"]
+    size = DRONE_TYPES[truth.class_id].size_m
+    stamps = truth.lidar_stamps_ns
+    expected = 0.0
+    for p in truth.drone_positions:
+        r = float(np.linalg.norm(p))
+        areas = [_projected_area(size, p / r, y) for y in np.linspace(0, np.pi, 7)]
+        expected += 4.7 * 3000 * float(np.mean(areas)) / r**2
+    seen = truth.avia_drone_points[np.searchsorted(truth.avia_stamps_ns, stamps)].sum()
+    assert expected > 5
+    assert 0.5 < seen / expected < 2.0

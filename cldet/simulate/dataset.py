@@ -81,10 +81,12 @@ class SequenceTruth:
     drone_positions: F64  # (N, 3) body centre at the Mid-360 stamps
     mid360_drone_points: I64  # (N,) Mid-360 points on the drone per file
     mid360_drone_centroids: F64  # (N, 3) mean of those points (NaN when none): the near-face bias
+    mid360_distractor_points: I64  # (N,) Mid-360 points on people and birds per file
     avia_stamps_ns: I64  # (M,) stamps of the Avia files
     avia_drone_points: I64  # (M,) Avia points on the drone per file
     distractors: tuple[str, ...]  # movers other than the drone ("person", "bird")
     merged_stamp_ns: int | None  # stamp of the 40032-row Mid-360 file, None when no frame was lost
+    hover_anchor: F64 | None  # (3,) top of the car / lamp post hovered over ("hover"), else None
 
 
 @dataclass(frozen=True)
@@ -200,7 +202,7 @@ def _simulate_sequence(
     t0_ns = int(epoch_s) * 1_000_000_000 + int(rng.integers(0, 60_000_000)) * 1000
     cls = int(rng.integers(len(DRONE_TYPES))) if class_id is None else int(class_id)
     scene = build_scene(rng)
-    track, _anchor = plan_drone(rng, scenario, duration_s, scene)
+    track, anchor = plan_drone(rng, scenario, duration_s, scene)
     movers: list[Mover] = [drone_mover(track, DRONE_TYPES[cls])]
     start_xyz = track.at(np.array([0.0]))[0]
     n_people = int(rng.integers(1, 3)) if scenario == "person" else int(rng.random() < 0.35)
@@ -254,23 +256,29 @@ def _simulate_sequence(
     pending_points = 0
     pending_sum = np.zeros(3)
     mid_sums: list[F64] = []
+    mid_others: list[int] = []
+    pending_others = 0
     for k in range(n_lidar):
         frame = mid360_frame(rng, rows[k], rel_s(mid_ns[k]), scene, movers)
         if k == lost:
             pending, pending_points, pending_sum = frame.points, frame.drone_points, frame.drone_sum
+            pending_others = frame.distractor_points
             continue
         points = frame.points
         n_drone = frame.drone_points
         drone_sum = frame.drone_sum
+        others = frame.distractor_points
         if pending is not None:
             points = np.concatenate([pending, points])
             n_drone += pending_points
             drone_sum = drone_sum + pending_sum
+            others += pending_others
             pending = None
         _save_npy(seq_dir / "lidar_360" / f"{format_stamp(int(mid_ns[k]))}.npy", points)
         written_mid.append(int(mid_ns[k]))
         mid_points.append(n_drone)
         mid_sums.append(drone_sum)
+        mid_others.append(others)
 
     clutter = avia_clutter_states(rng, n_lidar)
     avia_points: list[int] = []
@@ -310,10 +318,12 @@ def _simulate_sequence(
         drone_positions=track.at((lidar_ns - t0_ns) / 1e9),
         mid360_drone_points=counts,
         mid360_drone_centroids=centroids,
+        mid360_distractor_points=np.array(mid_others, dtype=np.int64),
         avia_stamps_ns=avia_ns.astype(np.int64),
         avia_drone_points=np.array(avia_points, dtype=np.int64),
         distractors=tuple(m.name for m in movers[1:]),
         merged_stamp_ns=int(mid_ns[lost + 1]) if lost >= 0 else None,
+        hover_anchor=anchor,
     )
 
 

@@ -230,7 +230,7 @@ def plan_drone(
             t += float(np.linalg.norm(nxt - last)) / speed + hold
             last = nxt
     elif scenario == "person":
-        start = _lift(scene, _in_field(rng, 5, 16, 0, 15), 1.5)
+        start = _lift(scene, _in_field(rng, 5, 12, 0, 15), 1.5)
         t = 0.0
         last = start
         while t < d + 2:
@@ -243,12 +243,15 @@ def plan_drone(
             t += float(np.linalg.norm(nxt - last)) / speed + hold
             last = nxt
     else:  # "mixed" and "bird": varied flight through the Mid-360 field, the cone, far away
-        start = _lift(scene, _in_field(rng, 5, 40, 0, 40), 1.0)
+        if rng.random() < 0.4:  # the real drones spend most of their time high, in the Avia cone
+            start = _in_cone(rng, 8, 45)
+        else:
+            start = _lift(scene, _in_field(rng, 5, 40, 0, 40), 1.0)
         t = 0.0
         last = start
         while t < d + 2:
             mode = rng.choice(
-                ["field", "cone", "far", "near", "hover"], p=[0.3, 0.3, 0.1, 0.15, 0.15]
+                ["field", "cone", "far", "near", "hover"], p=[0.25, 0.4, 0.1, 0.1, 0.15]
             )
             speed = float(rng.uniform(1.0, 8.0))
             hold = float(rng.uniform(0.0, 2.0))

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from cldet.simulate.flight import Mover
 from cldet.simulate.raycast import hit_moving_box, hit_moving_cylinder, hit_moving_sphere
-from cldet.simulate.scene import DRONE, HIT_PROBABILITY, PENETRATION_M, Scene
+from cldet.simulate.scene import BIRD, DRONE, HIT_PROBABILITY, PENETRATION_M, PERSON, Scene
 
 F64 = NDArray[np.float64]
 
@@ -41,6 +41,7 @@ class ScanResult:
     points: F64  # (rows, 3) float64 with zero rows where no return; metres
     drone_points: int  # how many valid rows are on the drone
     drone_sum: F64  # (3,) sum of the drone's points (metres), for centroids
+    distractor_points: int  # how many valid rows are on people and birds
 
 
 def mid360_directions(rng: np.random.Generator, rows: int) -> F64:
@@ -171,6 +172,7 @@ def mid360_frame(
     on_drone = valid & (kind == DRONE)
     drone = int(np.count_nonzero(on_drone))
     drone_sum = points[on_drone].sum(axis=0)
+    others = int(np.count_nonzero(valid & ((kind == PERSON) | (kind == BIRD))))
     empty = np.flatnonzero(~valid)
     n_speckle = int(rng.integers(0, 5))
     n_self = int(rng.integers(1, 4))
@@ -178,7 +180,7 @@ def mid360_frame(
         pick = rng.choice(empty, n_speckle + n_self, replace=False)
         ranges = np.concatenate([rng.uniform(1.0, 60.0, n_speckle), rng.uniform(0.03, 0.1, n_self)])
         points[pick] = _to_points(dirs[pick], ranges).astype(np.float64)
-    return ScanResult(points, drone, drone_sum)
+    return ScanResult(points, drone, drone_sum, others)
 
 
 def avia_frame(
@@ -194,17 +196,18 @@ def avia_frame(
     on_drone = valid & (kind == DRONE)
     drone = int(np.count_nonzero(on_drone))
     drone_sum = points[on_drone].sum(axis=0)
+    others = int(np.count_nonzero(valid & ((kind == PERSON) | (kind == BIRD))))
     if clutter:
         n = min(int(rng.geometric(0.35)), 10)
         empty = np.flatnonzero(~valid)
         pick = rng.choice(empty, n, replace=False)
         far = rng.random(n) < 0.75
-        ranges = np.where(far, rng.uniform(90.0, 430.0, n), rng.uniform(5.0, 60.0, n))
+        ranges = np.where(far, rng.uniform(100.0, 430.0, n), rng.uniform(5.0, 60.0, n))
         points[pick] = _to_points(dirs[pick], ranges).astype(np.float64)
         valid[pick] = True
     out = points
     out[~valid] = np.array([-0.0, -0.0, 0.0])
-    return ScanResult(out, drone, drone_sum)
+    return ScanResult(out, drone, drone_sum, others)
 
 
 def avia_clutter_states(rng: np.random.Generator, n: int) -> NDArray[np.bool_]:
