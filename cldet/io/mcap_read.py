@@ -252,6 +252,8 @@ class LogReader:
         Raises:
             LogError: a chunk cannot be read (corrupt or truncated file).
         """
+        if isinstance(topic_names, str):
+            topic_names = [topic_names]
         wanted = None if topic_names is None else list(topic_names)
         try:
             yield from self._reader.iter_messages(
