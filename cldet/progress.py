@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 from types import TracebackType
-from typing import Protocol
+from typing import Any, Protocol
 
 
 class Progress(Protocol):
@@ -32,8 +32,8 @@ class BarProgress:
 
     def __init__(self, enabled: bool | None = None) -> None:
         self.enabled = sys.stderr.isatty() if enabled is None else enabled
-        self._progress = None
-        self._task = None
+        self._progress: Any = None  # rich.progress.Progress once entered and enabled
+        self._task: Any = None  # its task id
 
     def __enter__(self) -> BarProgress:
         if self.enabled:
