@@ -34,24 +34,37 @@ def log(tmp_path: Path) -> Path:
     with open(path, "wb") as f, LogWriter(f) as writer:
         for i in range(20):
             stamp = 1_706_255_621_600_227_000 + i * 100_000_000
-            writer.write_cloud(topics.LIDAR_360, stamp, rng.normal(size=(50, 3)), topics.FRAME_MID360)
-            writer.write_pose(topics.GROUND_TRUTH, stamp + 5_000_000, rng.normal(size=3), topics.FRAME_MID360)
+            writer.write_cloud(
+                topics.LIDAR_360, stamp, rng.normal(size=(50, 3)), topics.FRAME_MID360
+            )
+            writer.write_pose(
+                topics.GROUND_TRUTH, stamp + 5_000_000, rng.normal(size=3), topics.FRAME_MID360
+            )
         writer.write_metadata(topics.METADATA_SOURCE, {"sequence": "seq0001"})
     return path
 
 
 def _pose_additions(stamps: list[int], offset: float) -> list:
     return [
-        (s, lambda w, s=s: w.write_pose(topics.ESTIMATE_POSE, s, [offset, 0.0, 0.0], topics.FRAME_MID360))
+        (
+            s,
+            lambda w, s=s: w.write_pose(
+                topics.ESTIMATE_POSE, s, [offset, 0.0, 0.0], topics.FRAME_MID360
+            ),
+        )
         for s in stamps
     ]
 
 
-def test_rewrite_copies_sources_byte_for_byte_and_interleaves_results(log: Path, tmp_path: Path) -> None:
+def test_rewrite_copies_sources_byte_for_byte_and_interleaves_results(
+    log: Path, tmp_path: Path
+) -> None:
     before = _messages(log)
     stamps = [m[1] for m in before if m[0] == topics.LIDAR_360]
     out = tmp_path / "out.mcap"
-    stats = rewrite_log(log, out, _pose_additions(stamps[::-1], 1.0), metadata={"cldet.config": {"method": "x"}})
+    stats = rewrite_log(
+        log, out, _pose_additions(stamps[::-1], 1.0), metadata={"cldet.config": {"method": "x"}}
+    )
     after = _messages(out)
     assert [m for m in after if not m[0].startswith("/cldet/")] == before
     results = [m for m in after if m[0] == topics.ESTIMATE_POSE]
@@ -59,7 +72,10 @@ def test_rewrite_copies_sources_byte_for_byte_and_interleaves_results(log: Path,
     assert all(m[1] == m[2] for m in results)
     assert [m[1] for m in after] == sorted(m[1] for m in after)
     assert stats.copied_messages == len(before) and stats.added_messages == len(stamps)
-    assert _metadata(out) == {topics.METADATA_SOURCE: {"sequence": "seq0001"}, "cldet.config": {"method": "x"}}
+    assert _metadata(out) == {
+        topics.METADATA_SOURCE: {"sequence": "seq0001"},
+        "cldet.config": {"method": "x"},
+    }
     assert _messages(log) == before  # the input is untouched
 
 
@@ -67,7 +83,11 @@ def test_rewriting_twice_in_place_replaces_earlier_results(log: Path) -> None:
     stamps = [m[1] for m in _messages(log) if m[0] == topics.LIDAR_360]
     rewrite_log(log, log, _pose_additions(stamps, 1.0), metadata={"cldet.config": {"run": "1"}})
     stats = rewrite_log(
-        log, log, _pose_additions(stamps[:5], 2.0), metadata={"cldet.config": {"run": "2"}}, replace_metadata=["cldet.config"]
+        log,
+        log,
+        _pose_additions(stamps[:5], 2.0),
+        metadata={"cldet.config": {"run": "2"}},
+        replace_metadata=["cldet.config"],
     )
     assert stats.dropped_messages == len(stamps)
     results = [m for m in _messages(log) if m[0] == topics.ESTIMATE_POSE]
@@ -82,7 +102,10 @@ def test_failure_midway_leaves_the_input_intact_and_no_temporary_file(log: Path)
     def explode(writer: LogWriter) -> None:
         raise RuntimeError("boom")
 
-    additions = [*_pose_additions([1_706_255_621_600_227_000], 1.0), (1_706_255_622_600_227_000, explode)]
+    additions = [
+        *_pose_additions([1_706_255_621_600_227_000], 1.0),
+        (1_706_255_622_600_227_000, explode),
+    ]
     with pytest.raises(RuntimeError, match="boom"):
         rewrite_log(log, log, additions)
     assert log.read_bytes() == original
