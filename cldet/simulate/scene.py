@@ -281,7 +281,15 @@ def build_scene(rng: np.random.Generator) -> Scene:
 
     for _ in range(int(rng.integers(5, 13))):  # buildings
         cx, cy = _polar(rng, 18, 70)
-        add_box(cx, cy, rng.uniform(5, 20), rng.uniform(5, 20), rng.uniform(3, 12), BUILDING, 15.0)
+        add_box(
+            cx,
+            cy,
+            rng.uniform(5, 20),
+            rng.uniform(5, 20),
+            rng.uniform(3, 15),
+            BUILDING,
+            float(rng.uniform(8, 25)),
+        )
     for _ in range(int(rng.integers(2, 7))):  # walls, fences and hedges
         cx, cy = _polar(rng, 10, 45)
         long_side = rng.uniform(8, 30)
@@ -305,11 +313,11 @@ def build_scene(rng: np.random.Generator) -> Scene:
     centres: list[list[float]] = []
     radii: list[float] = []
     skinds: list[int] = []
-    for _ in range(int(rng.integers(2, 9))):  # trees: trunk + canopy
+    for _ in range(int(rng.integers(3, 11))):  # trees: trunk + canopy
         cx, cy = _polar(rng, 10, 50)
         z0 = ground(cx, cy) - 0.1
-        radius = float(rng.uniform(1.5, 3.5))
-        trunk = float(rng.uniform(1.5, 3.0))
+        radius = float(rng.uniform(1.5, 4.0))
+        trunk = float(rng.uniform(1.5, 6.0))
         top_allowed = _max_top(max(np.hypot(cx, cy) - radius, 1.0))
         centre_z = min(z0 + trunk + 0.7 * radius, top_allowed - radius)
         if centre_z < z0 + 0.5:

@@ -18,7 +18,15 @@ from numpy.typing import NDArray
 
 from cldet.simulate.flight import Mover
 from cldet.simulate.raycast import hit_moving_box, hit_moving_cylinder, hit_moving_sphere
-from cldet.simulate.scene import BIRD, DRONE, HIT_PROBABILITY, PENETRATION_M, PERSON, Scene
+from cldet.simulate.scene import (
+    BIRD,
+    DRONE,
+    GROUND,
+    HIT_PROBABILITY,
+    PENETRATION_M,
+    PERSON,
+    Scene,
+)
 
 F64 = NDArray[np.float64]
 
@@ -31,6 +39,8 @@ AVIA_MIN_ELEVATION_DEG = 52.0
 RANGE_NOISE_M = 0.02
 FADE_START_M = 70.0
 AVIA_DENSITY_SCALE = 0.85  # Avia per-ray return probability relative to the Mid-360 (~4.7x denser)
+_GRAZE_FULL = np.sin(np.radians(3.0))  # below this incidence the ground fades out
+_GRASS_M = 0.03  # mean depth of ground returns below the surface (grass), metres
 _SECTORS = 17  # azimuth sectors the Mid-360 sweeps up and down within one scan
 
 
@@ -152,9 +162,14 @@ def scan(
     hit = np.isfinite(dist)
     prob = np.zeros(rows)
     prob[hit] = HIT_PROBABILITY[kind[hit]] * _fade(dist[hit]) * density_scale
+    # the ground returns less at grazing incidence and from inside the grass
+    ground = kind == GROUND
+    sin_graze = np.maximum(-dirs[:, 2], 1e-3)
+    prob[ground] *= np.minimum(1.0, sin_graze[ground] / _GRAZE_FULL) ** 1.5
     valid = rng.random(rows) < prob
     r = np.where(valid, dist, 0.0)
     pen = PENETRATION_M[np.maximum(kind, 0)]
+    pen = np.where(ground, np.minimum(_GRASS_M / sin_graze, 2.0), pen)
     r = r + valid * (rng.normal(0.0, RANGE_NOISE_M, rows) + rng.exponential(1.0, rows) * pen)
     r = np.where(valid, np.maximum(r, 0.05), 0.0)
     points = _to_points(dirs, r).astype(np.float64)
