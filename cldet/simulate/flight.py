@@ -21,6 +21,7 @@ SCENARIOS: tuple[str, ...] = ("mixed", "close_pass", "hover", "avia_only", "pers
 
 _DT_S = 0.01  # trajectory sampling step, seconds
 _MARGIN_S = 1.0  # trajectories extend this far before and after the sequence
+_MIN_RANGE_M = 2.0  # the drone never comes nearer the sensor than this
 
 
 @dataclass(frozen=True)
@@ -141,6 +142,9 @@ def _follow(
     freq = rng.uniform(0.2, 0.8, 3)
     phase = rng.uniform(0, 2 * np.pi, 3)
     pos = pos + amp * np.sin(2 * np.pi * freq * times[:, None] + phase)
+    # keep at least 2 m from the sensor (a path between far points may cut close to it)
+    r = np.linalg.norm(pos, axis=1)
+    pos = pos * np.maximum(1.0, _MIN_RANGE_M / np.maximum(r, 1e-6))[:, None]
     # stay at least 0.6 m above the ground
     ground = floor.ground_height(pos[:, 0], pos[:, 1])
     pos[:, 2] = np.maximum(pos[:, 2], ground + 0.6)
@@ -174,9 +178,19 @@ def _in_field(
 
 
 def _lift(scene: Scene, p: F64, clearance: float = 1.0) -> F64:
-    """Raise ``p`` to at least ``clearance`` metres above the ground."""
-    g = float(scene.ground_height(np.asarray(p[0]), np.asarray(p[1])))
-    return np.array([p[0], p[1], max(p[2], g + clearance)])
+    """Raise ``p`` to at least ``clearance`` metres above whatever static thing is below it."""
+    top = scene.top_height(float(p[0]), float(p[1]))
+    return np.array([p[0], p[1], max(p[2], top + clearance)])
+
+
+def _visible(scene: Scene, p: F64) -> bool:
+    """Whether the static scene leaves a clear line of sight from the sensor to ``p`` (+-0.2 m)."""
+    offsets = np.array([[0, 0, 0], [0.2, 0, 0], [-0.2, 0, 0], [0, 0.2, 0], [0, 0, 0.2]])
+    targets = p[None, :] + offsets
+    r = np.linalg.norm(targets, axis=1)
+    # vegetation flutter is irrelevant here: a fixed generator keeps the caller's stream untouched
+    dist, _ = scene.cast(targets / r[:, None], 0.0, np.random.default_rng(0))
+    return bool(np.count_nonzero(dist > r - 0.3) >= 4)
 
 
 def plan_drone(
@@ -204,12 +218,17 @@ def plan_drone(
         wps = [_Waypoint(mid, 0.0, speed), _Waypoint(end, 0.0, speed)]
     elif scenario == "hover":
         anchors = scene.anchors()
-        near = anchors[np.hypot(anchors[:, 0], anchors[:, 1]) < 15.0] if len(anchors) else anchors
-        if len(near):
+        lift = float(rng.uniform(0.8, 1.2))
+        near = [
+            a
+            for a in anchors
+            if np.hypot(a[0], a[1]) < 15.0 and _visible(scene, a + np.array([0.0, 0.0, lift]))
+        ]
+        if near:
             anchor = near[int(rng.integers(len(near)))]
         else:
             anchor = _lift(scene, _in_field(rng, 6, 12, 0, 0), 0.0)
-        target = anchor + np.array([0.0, 0.0, float(rng.uniform(0.8, 1.2))])
+        target = anchor + np.array([0.0, 0.0, lift])
         az = float(rng.uniform(-np.pi, np.pi))
         start = _lift(scene, target + rng.uniform(2, 4) * np.array([np.cos(az), np.sin(az), 0.1]))
         leave = _lift(
@@ -231,6 +250,10 @@ def plan_drone(
             last = nxt
     elif scenario == "person":
         start = _lift(scene, _in_field(rng, 5, 12, 0, 15), 1.5)
+        for _ in range(20):  # start where the Mid-360 can see the drone
+            if _visible(scene, start):
+                break
+            start = _lift(scene, _in_field(rng, 5, 12, 0, 15), 1.5)
         t = 0.0
         last = start
         while t < d + 2:

@@ -52,6 +52,28 @@ class Scene:
             h = h + amp * np.sin(kx * x + ky * y + phase)
         return h
 
+    def top_height(self, x: float, y: float, margin_m: float = 0.5) -> float:
+        """Highest static surface (ground, roof, pole, canopy) within ``margin_m`` of x, y (metres)."""
+        top = float(self.ground_height(np.asarray(x), np.asarray(y)))
+        lo, hi = self.box_lower, self.box_upper
+        over = (
+            (lo[:, 0] - margin_m <= x)
+            & (x <= hi[:, 0] + margin_m)
+            & (lo[:, 1] - margin_m <= y)
+            & (y <= hi[:, 1] + margin_m)
+        )
+        if over.any():
+            top = max(top, float(hi[over, 2].max()))
+        c = self.cylinders
+        near = np.hypot(c[:, 0] - x, c[:, 1] - y) <= c[:, 2] + margin_m
+        if near.any():
+            top = max(top, float(c[near, 4].max()))
+        sc, sr = self.sphere_centres, self.sphere_radii
+        near = np.hypot(sc[:, 0] - x, sc[:, 1] - y) <= sr + margin_m
+        if near.any():
+            top = max(top, float((sc[near, 2] + sr[near]).max()))
+        return top
+
     def anchors(self) -> F64:
         """(K, 3) tops of cars and lamp posts (metres): things a drone may hover just above."""
         cars = self.box_kind == CAR
