@@ -64,17 +64,14 @@ class BackgroundConfig(BaseModel):
     margin_m: float = Field(
         default=0.3, ge=0, description="foreground = nearer than static by more than"
     )
+    floating_max_size_m: float = Field(
+        default=1.2,
+        ge=0,
+        description="static blobs this small floating in free space are not background (0: off)",
+    )
+    floating_max_range_m: float = Field(default=30.0, gt=0, description="... when nearer than this")
     margin_fraction: float = Field(
         default=0.03, ge=0, lt=1, description="... or this fraction of range"
-    )
-    recent_memory_s: float = Field(
-        default=2.0, ge=0, description="keep raw points near clusters of the last this many seconds"
-    )
-    recent_cell_m: float = Field(
-        default=2.0, gt=0, description="cell of that memory (about its radius)"
-    )
-    recent_extent_m: float = Field(
-        default=40.0, gt=0, description="the memory covers |x|,|y|,|z| < this"
     )
 
 
@@ -108,15 +105,18 @@ class TrackingConfig(BaseModel):
     max_miss_s: float = Field(
         default=1.5, gt=0, description="a candidate track ends after this unseen"
     )
-    min_speed: float = Field(
-        default=0.3, ge=0, description="below: not moving (static clutter or hover)"
+    static_spread_m: float = Field(
+        default=1.0, ge=0, description="a track whose detections all lie this close is static"
+    )
+    cruise_speed: float = Field(
+        default=8.0, gt=0, description="median speeds above this are less drone-like"
     )
     max_speed: float = Field(default=15.0, gt=0, description="above: not a drone")
     max_size_m: float = Field(
         default=1.2, gt=0, description="clusters larger than this are not a drone"
     )
     min_height_m: float = Field(
-        default=1.0, description="centroids lower than this above ground: unlikely"
+        default=1.5, description="centroids lower than this above ground: unlikely"
     )
     ground_z_m: float | None = Field(
         default=None, description="ground height; None = learn from background"
@@ -126,7 +126,16 @@ class TrackingConfig(BaseModel):
     )
     link_speed: float = Field(default=10.0, gt=0, description="max mean speed across a bridged gap")
     raw_gate_m: float = Field(
-        default=0.6, ge=0, description="raw-point search radius around a prediction"
+        default=0.6, ge=0, description="raw-point search radius around a prediction (0: off)"
+    )
+    raw_min_cluster_hits: int = Field(
+        default=3, ge=1, description="cluster detections before a track may use raw points"
+    )
+    raw_min_spread_m: float = Field(
+        default=0.3, ge=0, description="... spread over at least this (the track has moved)"
+    )
+    raw_weight: float = Field(
+        default=0.5, ge=0, le=1, description="score weight of a raw-gate detection"
     )
     fallback_position: tuple[float, float, float] = Field(
         default=(0.734, -9.739, 33.353), description="used only when no track exists at all"
@@ -142,8 +151,10 @@ class SmoothingConfig(BaseModel):
     accel_psd: float = Field(
         default=2.0, gt=0, description="white-acceleration PSD of the smoother"
     )
-    max_extrapolation_s: float = Field(
-        default=1.0, ge=0, description="beyond this from a detection, hold the velocity no longer"
+    extrapolation_tau_s: float = Field(
+        default=1.5,
+        gt=0,
+        description="beyond the detections the velocity decays with this time constant",
     )
 
 

@@ -15,14 +15,19 @@ of* that environment along a ray. The model is a static range image (pass 1, str
    (0.85) of the bins (the k-th smallest per-bin minimum, k = ceil(0.85 B)). A wall, the
    ground or a tree gives that range in every bin; a drone hovering in one place for half the
    sequence does not (it is there in ~half the bins), so it stays in front of the static range.
-4. Dilation: the static range is replaced by the minimum over the cell and its 8 neighbours
+4. A static object never floats: lamp posts, cars and trees stand on something. A small blob
+   of static cells (3D extent at most ``floating_max_size_m``, nearer than
+   ``floating_max_range_m``) whose neighbouring directions are all empty or far from it in
+   range (by max(1 m, 10 % of its range)), and at most half of them nearer (occluding), is a
+   drone hovering through (nearly) the whole sequence, not environment: its cells are cleared. Blobs are the 8-connected cells whose static
+   ranges differ by at most max(0.5 m, 5 %).
+5. Dilation: the static range is replaced by the minimum over the cell and its 8 neighbours
    (azimuth wraps), ``dilate_cells`` times. Foliage swaying by a few cm into the next cell,
    and beam divergence at edges, then stay background.
-5. A point is background when its range is not shorter than the static range by more than
+6. A point is background when its range is not shorter than the static range by more than
    ``max(margin_m, margin_fraction * range)`` (0.3 m, 3 %: range noise ~2 cm, foliage depth).
    It is CORE background against the undilated static range, MARGIN when background only
-   through dilation (a drone right next to static structure falls there; the estimator keeps
-   those points for the tracker's raw-point gate), FOREGROUND otherwise.
+   through dilation (a drone right next to static structure falls there), FOREGROUND otherwise.
 
 Points from both LiDARs are counted together (both are in the Mid-360 frame; the Avia covers
 the cone above 52 deg elevation). A trailing bin shorter than half a bin is merged into the
@@ -39,7 +44,7 @@ from scipy import ndimage
 
 from cldet.config import BackgroundConfig
 
-__all__ = ["CORE", "FOREGROUND", "MARGIN", "BackgroundModel", "RecentRegions", "direction_cells"]
+__all__ = ["CORE", "FOREGROUND", "MARGIN", "BackgroundModel", "direction_cells"]
 
 FOREGROUND = np.uint8(0)  # in front of the static environment
 MARGIN = np.uint8(1)  # background only through dilation
@@ -113,6 +118,97 @@ def _classify_kernel(
     return out
 
 
+@numba.njit(cache=True)
+def _floating_blobs(
+    static: NDArray[np.float32], cell_deg: float, max_range: float, max_size: float
+) -> NDArray[np.bool_]:
+    """Cells of small static blobs floating in free space (see the module docstring, step 4)."""
+    n_el, n_az = static.shape
+    comp = np.full((n_el, n_az), -1, dtype=np.int64)
+    out = np.zeros((n_el, n_az), dtype=np.bool_)
+    stack = np.empty((n_el * n_az, 2), dtype=np.int64)
+    members = np.empty((n_el * n_az, 2), dtype=np.int64)
+    deg = np.pi / 180.0
+    n_comp = 0
+    for e0 in range(n_el):
+        for a0 in range(n_az):
+            if comp[e0, a0] >= 0 or not np.isfinite(static[e0, a0]):
+                continue
+            # flood fill over range-continuous 8-neighbours (azimuth wraps)
+            comp[e0, a0] = n_comp
+            top = 0
+            stack[0, 0], stack[0, 1] = e0, a0
+            top = 1
+            m = 0
+            while top > 0:
+                top -= 1
+                e, a = stack[top, 0], stack[top, 1]
+                members[m, 0], members[m, 1] = e, a
+                m += 1
+                r = static[e, a]
+                for de in (-1, 0, 1):
+                    ee = e + de
+                    if ee < 0 or ee >= n_el:
+                        continue
+                    for da in (-1, 0, 1):
+                        aa = (a + da) % n_az
+                        rn = static[ee, aa]
+                        if comp[ee, aa] >= 0 or not np.isfinite(rn):
+                            continue
+                        if abs(rn - r) <= max(0.5, 0.05 * min(r, rn)):
+                            comp[ee, aa] = n_comp
+                            stack[top, 0], stack[top, 1] = ee, aa
+                            top += 1
+            # judge the component
+            ok = True
+            n_border = 0
+            n_nearer = 0
+            lo = np.full(3, np.inf)
+            hi = np.full(3, -np.inf)
+            for k in range(m):
+                e, a = members[k, 0], members[k, 1]
+                r = static[e, a]
+                if r > max_range:
+                    ok = False
+                    break
+                el = ((e + 0.5) * cell_deg - 90.0) * deg
+                az = ((a + 0.5) * cell_deg - 180.0) * deg
+                p0 = r * np.cos(el) * np.cos(az)
+                p1 = r * np.cos(el) * np.sin(az)
+                p2 = r * np.sin(el)
+                lo[0], hi[0] = min(lo[0], p0), max(hi[0], p0)
+                lo[1], hi[1] = min(lo[1], p1), max(hi[1], p1)
+                lo[2], hi[2] = min(lo[2], p2), max(hi[2], p2)
+                if max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) > max_size:
+                    ok = False
+                    break
+                # every other neighbour: empty, or far in front or behind (free space around it)
+                clearance = max(1.0, 0.1 * r)
+                for de in (-1, 0, 1):
+                    ee = e + de
+                    if ee < 0 or ee >= n_el:
+                        continue
+                    for da in (-1, 0, 1):
+                        aa = (a + da) % n_az
+                        if comp[ee, aa] == n_comp:
+                            continue
+                        n_border += 1
+                        rn = static[ee, aa]
+                        if not np.isfinite(rn):
+                            continue
+                        if abs(rn - r) < clearance:
+                            ok = False
+                        elif rn < r:
+                            n_nearer += 1
+                if not ok:
+                    break
+            if ok and 2 * n_nearer <= n_border:
+                for k in range(m):
+                    out[members[k, 0], members[k, 1]] = True
+            n_comp += 1
+    return out
+
+
 class BackgroundModel:
     """Static range image over a whole sequence: ``observe`` every frame, then ``classify``."""
 
@@ -167,6 +263,16 @@ class BackgroundModel:
             static = stack[k - 1].reshape(self._n_el, self._n_az)
         else:
             static = np.full((self._n_el, self._n_az), np.inf, dtype=np.float32)
+        self.floating_cells = 0
+        if self.cfg.floating_max_size_m > 0:
+            floating = _floating_blobs(
+                static,
+                float(self.cfg.cell_deg),
+                float(self.cfg.floating_max_range_m),
+                float(self.cfg.floating_max_size_m),
+            )
+            self.floating_cells = int(floating.sum())
+            static = np.where(floating, np.float32(np.inf), static)
         dilated = static
         if self.cfg.dilate_cells > 0:
             size = 2 * self.cfg.dilate_cells + 1
@@ -212,59 +318,3 @@ class BackgroundModel:
     def is_background(self, points: NDArray[np.floating]) -> NDArray[np.bool_]:
         """True for points that are (dilated) background."""
         return self.classify(points) != FOREGROUND
-
-
-class RecentRegions:
-    """Which places held a cluster in the last few frames (a coarse dense grid of frame indices).
-
-    Used to keep the raw (background) points near recent clusters, so that a drone that stops
-    right at static structure can still be found by the tracker's raw-point gate.
-    """
-
-    def __init__(self, extent_m: float, cell_m: float, memory_ns: int) -> None:
-        n = max(1, int(np.ceil(2 * extent_m / cell_m)))
-        self._lower = np.full(3, -extent_m)
-        self._cell = cell_m
-        self._shape = np.array([n, n, n])
-        self._last = np.full((n, n, n), np.iinfo(np.int64).min // 2, dtype=np.int64)  # stamp, ns
-        self._memory = int(memory_ns)
-
-    def mark(self, centres: NDArray[np.floating], stamp_ns: int) -> None:
-        """Mark the cells around ``centres`` (K,3) (their cell and its 26 neighbours)."""
-        if len(centres) == 0:
-            return
-        ijk = np.floor((np.asarray(centres) - self._lower) / self._cell).astype(np.int64)
-        ok = np.all((ijk >= -1) & (ijk <= self._shape), axis=1)
-        for i, j, k in ijk[ok].tolist():
-            self._last[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2, max(k - 1, 0) : k + 2] = (
-                stamp_ns
-            )
-
-    def contains(self, points: NDArray[np.floating], stamp_ns: int) -> NDArray[np.bool_]:
-        """True for points (N,3) in a cell marked at most ``memory_ns`` before ``stamp_ns``."""
-        return _contains_kernel(
-            np.ascontiguousarray(points, dtype=np.float32),
-            self._lower.astype(np.float64),
-            float(self._cell),
-            self._last,
-            stamp_ns - self._memory,
-        )
-
-
-@numba.njit(cache=True)
-def _contains_kernel(
-    points: NDArray[np.float32],
-    lower: NDArray[np.float64],
-    cell: float,
-    last: NDArray[np.int64],
-    since: int,
-) -> NDArray[np.bool_]:
-    n = points.shape[0]
-    out = np.zeros(n, dtype=np.bool_)
-    for i in range(n):
-        a = int(np.floor((points[i, 0] - lower[0]) / cell))
-        b = int(np.floor((points[i, 1] - lower[1]) / cell))
-        c = int(np.floor((points[i, 2] - lower[2]) / cell))
-        if 0 <= a < last.shape[0] and 0 <= b < last.shape[1] and 0 <= c < last.shape[2]:
-            out[i] = last[a, b, c] >= since
-    return out

@@ -3,7 +3,7 @@
 An estimator sees a sequence twice, in order: ``observe`` every frame (pass 1: learn the static
 background), then ``process`` every frame (pass 2: the per-frame verb, returning that frame's
 foreground and clusters), then ``finish`` once (association, selection, smoothing: the method is
-offline). Memory stays small: per frame only the clusters and a few hundred points are kept.
+offline). Memory stays small: per frame only the clusters are kept.
 
 ``track`` (:class:`TrackEstimator`):
 
@@ -14,13 +14,14 @@ offline). Memory stays small: per frame only the clusters and a few hundred poin
 3. the foreground clustered exactly (``cldet.core.clustering``: DBSCAN eps 1 m, min 1 point, as
    a far drone gives 1-3 points);
 4. every cluster seeds or extends a candidate Kalman track (``cldet.core.tracking``);
+   a confirmed moving track that gets no cluster continues on the raw points (background
+   included) within ``raw_gate_m`` of its prediction, so a drone stopping at static structure
+   does not vanish;
 5. ``finish``: the drone's chain of tracks chosen by whole-sequence evidence
-   (``cldet.core.selection``); in frames where it has no cluster, the raw points (background
-   included: margin points, and all points near recent clusters) within ``raw_gate_m`` of the
-   track's prediction count as a detection, so a drone stopping at static structure does not
-   vanish; a forward-backward RTS smoother (``cldet.core.smoothing``) fills the gaps; before the
-   first and after the last detection the track's own motion is extrapolated (for at most
-   ``max_extrapolation_s``, then held); the centroid bias correction (``cldet.core.bias``) is
+   (``cldet.core.selection``); a forward-backward RTS smoother (``cldet.core.smoothing``) fills the gaps; before the
+   first and after the last detection the track's own motion is extrapolated, its velocity
+   decaying with time constant ``extrapolation_tau_s`` (a drone does not fly straight for
+   ever); the centroid bias correction (``cldet.core.bias``) is
    applied last. Only when no candidate track exists at all is the configured fallback
    position used.
 """
@@ -35,12 +36,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cldet.config import CldetConfig
-from cldet.core.background import CORE, FOREGROUND, MARGIN, BackgroundModel, RecentRegions
+from cldet.core.background import FOREGROUND, BackgroundModel
 from cldet.core.bias import apply_bias
 from cldet.core.clustering import cluster_points, summarize_clusters
 from cldet.core.frames import valid_points
 from cldet.core.selection import ScoredTrack, score_tracks, select_chain
-from cldet.core.smoothing import KalmanCV, process_noise, rts_smooth, transition
+from cldet.core.smoothing import extrapolate, rts_smooth
 from cldet.core.tracking import CandidateTracker, ClusterTable
 from cldet.types import Cluster, Estimate, LidarFrame, Source
 
@@ -121,13 +122,8 @@ class TrackEstimator:
         self.config = config
         self.background = BackgroundModel(config.background)
         self._tracker = CandidateTracker(config.tracking)
-        bc = config.background
-        self._recent = RecentRegions(
-            bc.recent_extent_m, bc.recent_cell_m, int(round(bc.recent_memory_s * NS_PER_S))
-        )
         self._stamps: list[int] = []
         self._tables: list[ClusterTable] = []
-        self._gate_points: list[NDArray[np.float32]] = []
         self._last_observed: int | None = None
 
     def observe(self, frame: LidarFrame) -> None:
@@ -156,65 +152,14 @@ class TrackEstimator:
         labels = cluster_points(fg, cfg.clustering.eps_m, cfg.clustering.min_samples)
         clusters = summarize_clusters(fg, labels, n_mid_fg)
         table = ClusterTable.from_clusters(clusters)
-        # raw points the tracker's gate may need later: foreground, margin, and core points
-        # near recent clusters
-        keep = (lab == MARGIN) | fg_mask
-        core = lab == CORE
-        if core.any():
-            keep[core] = self._recent.contains(pts[core], frame.stamp_ns)
-        self._gate_points.append(pts[keep])
-        self._recent.mark(table.centroid, frame.stamp_ns)
         self._stamps.append(frame.stamp_ns)
         self._tables.append(table)
-        self._tracker.step(index, (frame.stamp_ns - self._stamps[0]) / NS_PER_S, table)
+        self._tracker.step(index, (frame.stamp_ns - self._stamps[0]) / NS_PER_S, table, pts)
         return FrameDetections(
             stamp_ns=frame.stamp_ns, foreground=fg, labels=labels, clusters=clusters
         )
 
     # ------------------------------------------------------------------ finish
-    def _gate_pass(
-        self,
-        order: Iterable[int],
-        t_s: NDArray[np.float64],
-        z: NDArray[np.float64],
-        sigma: NDArray[np.float64],
-        n_points: NDArray[np.int64],
-        raw: NDArray[np.bool_],
-    ) -> None:
-        """Run a filter along ``order``; fill frames without a measurement from the raw gate."""
-        tc = self.config.tracking
-        q = self.config.smoothing.accel_psd
-        kf: KalmanCV | None = None
-        prev = -1
-        last_meas_t = 0.0
-        for f in order:
-            if kf is None:
-                if np.isfinite(z[f, 0]):
-                    kf = KalmanCV(z[f], float(sigma[f]), tc.init_speed_sigma)
-                    prev, last_meas_t = f, t_s[f]
-                continue
-            kf.predict(t_s[f] - t_s[prev], q)
-            prev = f
-            if np.isfinite(z[f, 0]):
-                kf.update(z[f], float(sigma[f]))
-                last_meas_t = t_s[f]
-                continue
-            if abs(t_s[f] - last_meas_t) > tc.max_miss_s or tc.raw_gate_m <= 0:
-                continue
-            pts = self._gate_points[f]
-            if len(pts) == 0:
-                continue
-            d2 = np.einsum("ij,ij->i", pts - kf.position, pts - kf.position)
-            sel = d2 <= tc.raw_gate_m**2
-            if not sel.any():
-                continue
-            z[f] = pts[sel].mean(axis=0)
-            sigma[f] = tc.raw_meas_sigma_m
-            n_points[f] = int(sel.sum())
-            raw[f] = True
-            kf.update(z[f], float(sigma[f]))
-            last_meas_t = t_s[f]
-
     def finish(self) -> SequenceEstimate:
         """Select the drone's chain of tracks, fill gaps from raw points, smooth, extrapolate."""
         cfg = self.config
@@ -237,14 +182,19 @@ class TrackEstimator:
         sigma = np.full(n, tc.meas_sigma_m)
         n_points = np.zeros(n, dtype=np.int64)
         chosen: dict[int, int] = {}
+        raw = np.zeros(n, dtype=bool)
         events: list[TrackEvent] = []
         for k, (tr, i0, i1) in enumerate(chain):
             rec = tr.record
             for h in range(i0, i1):
                 f, c = int(rec.frames[h]), int(rec.clusters[h])
-                z[f] = self._tables[f].centroid[c]
-                n_points[f] = int(self._tables[f].n_points[c])
-                chosen[int(stamps[f])] = c
+                z[f] = rec.positions[h]
+                n_points[f] = int(rec.n_points[h])
+                if c >= 0:
+                    chosen[int(stamps[f])] = c
+                else:
+                    raw[f] = True
+                    sigma[f] = tc.raw_meas_sigma_m
             if k > 0:
                 events.append(
                     TrackEvent(
@@ -253,9 +203,6 @@ class TrackEstimator:
                         f"drone track continues as candidate {rec.track_id} (score {tr.score:.1f})",
                     )
                 )
-        raw = np.zeros(n, dtype=bool)
-        self._gate_pass(range(n), t_s, z, sigma, n_points, raw)
-        self._gate_pass(range(n - 1, -1, -1), t_s, z, sigma, n_points, raw)
         have = np.all(np.isfinite(z), axis=1)
         idx = np.flatnonzero(have)
         first, last = int(idx[0]), int(idx[-1])
@@ -266,15 +213,17 @@ class TrackEstimator:
         pos[seg] = sm.position
         var[seg] = sm.pos_var
         q = cfg.smoothing.accel_psd
-        cap = cfg.smoothing.max_extrapolation_s
         for f in list(range(first)) + list(range(last + 1, n)):
             k_end = 0 if f < first else -1
             dt = t_s[f] - t_s[first if f < first else last]
-            dt_eff = float(np.clip(dt, -cap, cap))
-            x_end = np.stack([sm.position[k_end], sm.velocity[k_end]], axis=1)  # (3,2)
-            F = transition(dt_eff)
-            pos[f] = (x_end @ F.T)[:, 0]
-            var[f] = float((F @ sm.cov[k_end] @ F.T + process_noise(dt, q))[0, 0])
+            pos[f], var[f] = extrapolate(
+                sm.position[k_end],
+                sm.velocity[k_end],
+                sm.cov[k_end],
+                dt,
+                q,
+                cfg.smoothing.extrapolation_tau_s,
+            )
         pos = apply_bias(pos, cfg.bias)
 
         estimates = []

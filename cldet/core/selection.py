@@ -6,13 +6,18 @@ each detection weighted by per-detection evidence and the track's factors:
 
 * size: a detection whose cluster box is larger than ``max_size_m`` (1.2 m; the largest
   drones are ~0.8 m) weighs 0.1 (a person, a car, a branch);
-* height: factor 0.1 + 0.9 f, f = fraction of detections at least ``min_height_m`` above the
-  ground (a walking person's centroid is ~0.9 m up; the drone flies);
+* height: a detection less than ``min_height_m`` (1.5 m) above the ground weighs 0.1 (a walking
+  person's visible centroid is ~0.9-1.2 m up; the drone flies higher nearly all the time);
+* raw: a detection from the raw-point gate (no cluster) weighs ``raw_weight`` (0.5);
 * speed: factor 0.1 when the track's 90th-percentile filtered speed exceeds ``max_speed``
-  (15 m/s); factor 0.5 when its median speed stays under ``min_speed`` (0.3 m/s) and it never
-  moved more than 1 m: static clutter, or a hovering drone (kept, but a mover wins ties);
-* motion consistency: factor min(1, 2 / mean NIS per axis): smooth constant-velocity motion
-  gives ~1, erratic speckle or a bird's jinks give more;
+  (15 m/s); above ``cruise_speed`` (8 m/s: survey and filming flights are slower; a crossing
+  bird is faster) the median speed lowers the factor linearly to 0.3 at ``max_speed``;
+  factor 0.2 when all its detections lie within ``static_spread_m`` (1 m) of each other: static
+  clutter (a lamp head, a leaf clump), or a drone hovering the whole time (kept when nothing
+  else is there, but a real mover wins);
+* motion consistency: a detection whose NIS exceeds 7.81 (the 95 % point of chi^2, 3 dof)
+  weighs exp(-(NIS - 7.81) / 7.81): smooth motion keeps its weight, erratic speckle or a
+  bird's jinks lose it;
 * sensors: factor 1 + 0.5 f, f = fraction of detections seen by both LiDARs in one cluster.
 
 Tracks of a single detection are not candidates. The drone's record is often several tracks
@@ -36,6 +41,7 @@ from cldet.core.tracking import ClusterTable, TrackRecord
 __all__ = ["ScoredTrack", "score_tracks", "select_chain"]
 
 _LINK_COST = 2.0
+_NIS95 = 7.81  # 95 % point of chi^2 with 3 degrees of freedom
 
 
 @dataclass(frozen=True)
@@ -62,30 +68,31 @@ def score_tracks(
         h = len(rec.frames)
         if h < 2:
             continue
-        pos = np.array(
-            [tables[f].centroid[c] for f, c in zip(rec.frames, rec.clusters, strict=True)]
-        )
-        extent = np.array(
-            [tables[f].extent[c] for f, c in zip(rec.frames, rec.clusters, strict=True)]
-        )
-        both = np.array(
-            [
-                tables[f].n_mid360[c] > 0 and tables[f].n_avia[c] > 0
-                for f, c in zip(rec.frames, rec.clusters, strict=True)
-            ]
-        )
+        pos = rec.positions
+        raw = rec.raw
+        extent = np.zeros(h)
+        both = np.zeros(h, dtype=bool)
+        for k in np.flatnonzero(~raw):
+            table, c = tables[rec.frames[k]], rec.clusters[k]
+            extent[k] = table.extent[c]
+            both[k] = table.n_mid360[c] > 0 and table.n_avia[c] > 0
         per_det = np.where(extent <= cfg.max_size_m, 1.0, 0.1)
-        high = np.mean(pos[:, 2] - ground_z >= cfg.min_height_m)
-        factor = 0.1 + 0.9 * high
+        per_det *= np.where(pos[:, 2] - ground_z >= cfg.min_height_m, 1.0, 0.1)
+        per_det *= np.where(raw, cfg.raw_weight, 1.0)
+        # motion consistency: a detection far outside the constant-velocity prediction
+        # (NIS above the 95 % point of chi^2 with 3 dof) is down-weighted smoothly
+        nis = np.nan_to_num(rec.nis, nan=0.0)
+        per_det *= np.exp(-np.maximum(nis - _NIS95, 0.0) / _NIS95)
+        factor = 1.0
         speeds = rec.speed[2:] if h > 3 else rec.speed[1:]
-        if len(speeds) and np.percentile(speeds, 90) > cfg.max_speed:
-            factor *= 0.1
-        moved = float(np.max(np.ptp(pos, axis=0)))
-        if (not len(speeds) or np.median(speeds) < cfg.min_speed) and moved < 1.0:
-            factor *= 0.5
-        nis = rec.nis[np.isfinite(rec.nis)]
-        if len(nis) >= 2:
-            factor *= min(1.0, 2.0 / max(float(np.mean(nis)) / 3.0, 1e-9))
+        if len(speeds):
+            v = float(np.median(speeds))
+            if np.percentile(speeds, 90) > cfg.max_speed:
+                factor *= 0.1
+            elif v > cfg.cruise_speed:
+                factor *= 1.0 - 0.7 * (v - cfg.cruise_speed) / (cfg.max_speed - cfg.cruise_speed)
+        if float(np.max(np.ptp(pos, axis=0))) < cfg.static_spread_m:
+            factor *= 0.2
         factor *= 1.0 + 0.5 * float(np.mean(both))
         contribution = per_det * factor
         out.append(

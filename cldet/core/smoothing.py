@@ -16,7 +16,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["KalmanCV", "SmoothedTrack", "process_noise", "rts_smooth", "transition"]
+__all__ = [
+    "KalmanCV",
+    "SmoothedTrack",
+    "extrapolate",
+    "process_noise",
+    "rts_smooth",
+    "transition",
+]
 
 
 def transition(dt: float) -> NDArray[np.float64]:
@@ -149,3 +156,26 @@ def rts_smooth(
         cov=Ps,
         measured=have,
     )
+
+
+def extrapolate(
+    position: NDArray[np.floating],
+    velocity: NDArray[np.floating],
+    cov: NDArray[np.floating],
+    dt: float,
+    q: float,
+    tau_s: float,
+) -> tuple[NDArray[np.float64], float]:
+    """Position and per-axis variance ``dt`` seconds (either sign) from an end of the track.
+
+    The velocity decays with time constant ``tau_s``: the displacement is
+    v * tau * (1 - exp(-|dt| / tau)), which saturates at v * tau, instead of growing without
+    bound. The variance is the constant-velocity one (cov propagated over the effective time,
+    plus the white-acceleration noise over |dt|).
+    """
+    a = abs(dt)
+    eff = tau_s * (1.0 - np.exp(-a / tau_s)) * np.sign(dt)
+    F = transition(float(eff))
+    p = np.asarray(position, dtype=np.float64) + np.asarray(velocity, dtype=np.float64) * eff
+    var = float((F @ np.asarray(cov) @ F.T + process_noise(a, q))[0, 0])
+    return p, var

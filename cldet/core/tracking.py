@@ -12,7 +12,11 @@ whole-sequence evidence. Per frame:
    and |z - p| is below ``max_gate_m``;
 3. one-to-one assignment minimising the summed NIS (Hungarian, ``scipy``);
 4. unassigned clusters start new tracks (zero velocity, speed sigma ``init_speed_sigma``);
-5. a track not updated for ``max_miss_s`` ends.
+5. a track not updated for ``max_miss_s`` ends;
+6. a confirmed track (>= ``raw_min_cluster_hits`` cluster detections spread over at least
+   ``raw_min_spread_m``: it has moved) that got no cluster searches the frame's raw points,
+   background included, within ``raw_gate_m`` of its prediction: a drone that stops right at
+   static structure (hovering over a car) is learned as background but must not vanish.
 
 All tracks share the frame's dt, so the filter runs vectorised over tracks; each track's
 covariance is one 2x2 (see ``cldet.core.smoothing``).
@@ -67,17 +71,49 @@ class TrackRecord:
 
     track_id: int
     frames: NDArray[np.int64]  # (H,) frame indices of its detections
-    clusters: NDArray[np.int64]  # (H,) cluster index within each of those frames
+    clusters: NDArray[np.int64]  # (H,) cluster index within each of those frames, -1: raw gate
+    positions: NDArray[np.float64]  # (H,3) measured positions (cluster centroid / raw-gate mean)
+    n_points: NDArray[np.int64]  # (H,) points in the cluster / in the raw gate
     nis: NDArray[np.float64]  # (H,) normalised innovation squared of each update (NaN at birth)
     speed: NDArray[np.float64]  # (H,) filtered speed after each update, m/s
+
+    @property
+    def raw(self) -> NDArray[np.bool_]:
+        """(H,) the detection came from the raw-point gate, not from a foreground cluster."""
+        return self.clusters < 0
 
 
 @dataclass
 class _Hits:
     frames: list[int] = field(default_factory=list)
     clusters: list[int] = field(default_factory=list)
+    positions: list[NDArray[np.float64]] = field(default_factory=list)
+    n_points: list[int] = field(default_factory=list)
     nis: list[float] = field(default_factory=list)
     speed: list[float] = field(default_factory=list)
+    n_cluster_hits: int = 0
+    lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
+    upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
+
+    def add(
+        self, frame: int, cluster: int, pos: NDArray[np.float64], n: int, nis: float, speed: float
+    ) -> None:
+        self.frames.append(frame)
+        self.clusters.append(cluster)
+        self.positions.append(pos)
+        self.n_points.append(n)
+        self.nis.append(nis)
+        self.speed.append(speed)
+        if cluster >= 0:
+            self.n_cluster_hits += 1
+            np.minimum(self.lower, pos, out=self.lower)
+            np.maximum(self.upper, pos, out=self.upper)
+
+    def may_use_raw(self, min_hits: int, min_spread_m: float) -> bool:
+        return (
+            self.n_cluster_hits >= min_hits
+            and float(np.max(self.upper - self.lower)) >= min_spread_m
+        )
 
 
 class CandidateTracker:
@@ -93,8 +129,18 @@ class CandidateTracker:
         self._t: float | None = None
         self._next_id = 0
 
-    def step(self, frame_index: int, t_s: float, table: ClusterTable) -> None:
-        """Predict every active track to ``t_s`` seconds and associate this frame's clusters."""
+    def step(
+        self,
+        frame_index: int,
+        t_s: float,
+        table: ClusterTable,
+        raw_points: NDArray[np.floating] | None = None,
+    ) -> None:
+        """Predict every active track to ``t_s`` seconds and associate this frame's clusters.
+
+        ``raw_points`` (N,3), all of the frame's points (background included), let a confirmed
+        moving track that got no cluster continue on raw points near its prediction.
+        """
         cfg = self.cfg
         if self._t is not None and len(self._ids):
             dt = t_s - self._t
@@ -108,13 +154,12 @@ class CandidateTracker:
                 self._last_t, self._ids = self._last_t[keep], self._ids[keep]
         self._t = t_s
         k = len(table)
-        if k == 0:
-            return
         z = table.centroid
         r2 = cfg.meas_sigma_m**2
         assigned = np.zeros(k, dtype=bool)
         n_tr = len(self._ids)
-        if n_tr:
+        updated = np.zeros(n_tr, dtype=bool)
+        if n_tr and k:
             diff = z[None, :, :] - self._x[:, None, :, 0]  # (T,K,3)
             d2 = np.einsum("tkd,tkd->tk", diff, diff)
             s = self._P[:, 0, 0][:, None] + r2  # (T,1)
@@ -134,12 +179,18 @@ class CandidateTracker:
                     self._last_t[rows] = t_s
                     speeds = np.linalg.norm(self._x[rows, :, 1], axis=1)
                     for a, (i, j) in enumerate(zip(rows, cols, strict=True)):
-                        h = self._hits[int(self._ids[i])]
-                        h.frames.append(frame_index)
-                        h.clusters.append(int(j))
-                        h.nis.append(float(nis[i, j]))
-                        h.speed.append(float(speeds[a]))
+                        self._hits[int(self._ids[i])].add(
+                            frame_index,
+                            int(j),
+                            z[j],
+                            int(table.n_points[j]),
+                            float(nis[i, j]),
+                            float(speeds[a]),
+                        )
                     assigned[cols] = True
+                    updated[rows] = True
+        if raw_points is not None and len(raw_points) and n_tr and not updated.all():
+            self._raw_continue(frame_index, t_s, np.flatnonzero(~updated), raw_points)
         new = np.flatnonzero(~assigned)
         if len(new):
             m = len(new)
@@ -149,11 +200,49 @@ class CandidateTracker:
             ids = np.arange(self._next_id, self._next_id + m)
             self._next_id += m
             for tid, j in zip(ids, new, strict=True):
-                self._hits[int(tid)] = _Hits([frame_index], [int(j)], [float("nan")], [0.0])
+                hits = _Hits()
+                hits.add(frame_index, int(j), z[j], int(table.n_points[j]), float("nan"), 0.0)
+                self._hits[int(tid)] = hits
             self._x = np.concatenate([self._x, x])
             self._P = np.concatenate([self._P, P])
             self._last_t = np.concatenate([self._last_t, np.full(m, t_s)])
             self._ids = np.concatenate([self._ids, ids])
+
+    def _raw_continue(
+        self, frame_index: int, t_s: float, missed: NDArray[np.int64], raw: NDArray[np.floating]
+    ) -> None:
+        """Continue confirmed moving tracks that got no cluster on raw points near the prediction.
+
+        The raw points within ``raw_gate_m`` of the prediction (or, failing that, of the last
+        detection: the drone braked to hover) form the detection when the object is isolated
+        (see ``_isolated_blob``).
+        """
+        cfg = self.cfg
+        g = cfg.raw_gate_m
+        if g <= 0:
+            return
+        for i in missed:
+            hits = self._hits[int(self._ids[i])]
+            if not hits.may_use_raw(cfg.raw_min_cluster_hits, cfg.raw_min_spread_m):
+                continue
+            # where it would be: the constant-velocity prediction, or stopped where it was last
+            # seen (a drone braking to hover)
+            for centre, check_nis in ((self._x[i, :, 0], True), (hits.positions[-1], False)):
+                zr_n = _isolated_blob(raw, np.asarray(centre, dtype=np.float64), g)
+                if zr_n is None:
+                    continue
+                zr, n_in = zr_n
+                nu = zr - self._x[i, :, 0]
+                s = self._P[i, 0, 0] + cfg.raw_meas_sigma_m**2
+                nis = float(nu @ nu / s)
+                if check_nis and nis > cfg.gate_chi2:
+                    continue
+                gain = self._P[i, :, 0] / s
+                self._x[i] += nu[:, None] * gain[None, :]
+                self._P[i] -= np.outer(gain, self._P[i, 0, :])
+                self._last_t[i] = t_s
+                hits.add(frame_index, -1, zr, n_in, nis, float(np.linalg.norm(self._x[i, :, 1])))
+                break
 
     def records(self) -> list[TrackRecord]:
         """Every candidate track so far (ended or active), by track id."""
@@ -162,8 +251,31 @@ class CandidateTracker:
                 track_id=tid,
                 frames=np.asarray(h.frames, dtype=np.int64),
                 clusters=np.asarray(h.clusters, dtype=np.int64),
+                positions=np.asarray(h.positions, dtype=np.float64).reshape(-1, 3),
+                n_points=np.asarray(h.n_points, dtype=np.int64),
                 nis=np.asarray(h.nis, dtype=np.float64),
                 speed=np.asarray(h.speed, dtype=np.float64),
             )
             for tid, h in sorted(self._hits.items())
         ]
+
+
+def _isolated_blob(
+    raw: NDArray[np.floating], centre: NDArray[np.float64], gate_m: float
+) -> tuple[NDArray[np.float64], int] | None:
+    """Mean and count of the raw points within ``gate_m`` of ``centre`` if they are isolated.
+
+    Isolated: no more points in the shell ``gate_m..2 gate_m`` around the centre than in the
+    gate itself, ignoring what lies below (a car roof, a lamp post under a hovering drone).
+    A wall, a tree or the ground fails the test.
+    """
+    d = raw - centre
+    d2 = np.einsum("ij,ij->i", d, d)
+    in_gate = d2 <= gate_m * gate_m
+    n_in = int(in_gate.sum())
+    if n_in == 0:
+        return None
+    shell = (d2 > gate_m * gate_m) & (d2 <= 4 * gate_m * gate_m) & (d[:, 2] >= -0.5 * gate_m)
+    if int(shell.sum()) > n_in:
+        return None
+    return raw[in_gate].mean(axis=0).astype(np.float64), n_in
