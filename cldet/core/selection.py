@@ -12,7 +12,7 @@ each detection weighted by per-detection evidence and the track's factors:
 * speed: factor 0.1 when the track's 90th-percentile filtered speed exceeds ``max_speed``
   (15 m/s); above ``cruise_speed`` (8 m/s: survey and filming flights are slower; a crossing
   bird is faster) the median speed lowers the factor linearly to 0.3 at ``max_speed``;
-  factor 0.2 when all its detections lie within ``static_spread_m`` (1 m) of each other: static
+  factor 0.3 when all its detections lie within ``static_spread_m`` (1 m) of each other: static
   clutter (a lamp head, a leaf clump), or a drone hovering the whole time (kept when nothing
   else is there, but a real mover wins);
 * motion consistency: a detection whose NIS exceeds 7.81 (the 95 % point of chi^2, 3 dof)
@@ -20,7 +20,8 @@ each detection weighted by per-detection evidence and the track's factors:
   bird's jinks lose it;
 * sensors: factor 1 + 0.5 f, f = fraction of detections seen by both LiDARs in one cluster.
 
-Tracks of a single detection are not candidates. The drone's record is often several tracks
+A track's first detection does not count (anything can start a track: persistence is what
+the following detections show); tracks of a single detection are not candidates. The drone's record is often several tracks
 (long unseen stretches, a detection stolen by clutter). A chain is the sequence of tracks
 maximising the summed scores, where track A links to a later-starting track B if the jump
 from A's last detection before B starts to B's first is at most
@@ -92,9 +93,10 @@ def score_tracks(
             elif v > cfg.cruise_speed:
                 factor *= 1.0 - 0.7 * (v - cfg.cruise_speed) / (cfg.max_speed - cfg.cruise_speed)
         if float(np.max(np.ptp(pos, axis=0))) < cfg.static_spread_m:
-            factor *= 0.2
+            factor *= 0.3
         factor *= 1.0 + 0.5 * float(np.mean(both))
         contribution = per_det * factor
+        contribution[0] = 0.0  # a track's first detection is no evidence of persistence
         out.append(
             ScoredTrack(
                 record=rec,
