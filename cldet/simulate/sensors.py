@@ -83,9 +83,9 @@ def avia_directions(rng: np.random.Generator, rows: int = AVIA_ROWS) -> F64:
 
 
 def _fade(r: F64) -> F64:
-    """Return probability factor for range: 1 up to 70 m, then a Gaussian roll-off (gone by ~95 m)."""
+    """Return probability factor for range: 1 up to 70 m, then a Gaussian roll-off, none beyond 95 m."""
     f = np.exp(-(((r - FADE_START_M) / 12.0) ** 2))
-    return np.where(r <= FADE_START_M, 1.0, np.where(r < 100.0, f, 0.0))
+    return np.where(r <= FADE_START_M, 1.0, np.where(r < 95.0, f, 0.0))
 
 
 def _cast_movers(
@@ -181,7 +181,7 @@ def scan(
 def mid360_frame(
     rng: np.random.Generator, rows: int, stamp_s: float, scene: Scene, movers: list[Mover]
 ) -> ScanResult:
-    """One Mid-360 frame: ``rows`` rows, plus 0-4 lone speckle points and 1-3 self-returns."""
+    """One Mid-360 frame: ``rows`` rows, plus 0-4 lone speckle points and 1-2 self-returns."""
     dirs = mid360_directions(rng, rows)
     points, valid, kind = scan(dirs, stamp_s, scene, movers, rng)
     on_drone = valid & (kind == DRONE)
@@ -190,7 +190,7 @@ def mid360_frame(
     others = int(np.count_nonzero(valid & ((kind == PERSON) | (kind == BIRD))))
     empty = np.flatnonzero(~valid)
     n_speckle = int(rng.integers(0, 5))
-    n_self = int(rng.integers(1, 4))
+    n_self = int(rng.integers(1, 3))
     if len(empty) >= n_speckle + n_self:
         pick = rng.choice(empty, n_speckle + n_self, replace=False)
         ranges = np.concatenate([rng.uniform(1.0, 60.0, n_speckle), rng.uniform(0.03, 0.1, n_self)])
