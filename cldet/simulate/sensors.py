@@ -169,8 +169,9 @@ def scan(
     valid = rng.random(rows) < prob
     r = np.where(valid, dist, 0.0)
     pen = PENETRATION_M[np.maximum(kind, 0)]
-    pen = np.where(ground, np.minimum(_GRASS_M / sin_graze, 2.0), pen)
-    r = r + valid * (rng.normal(0.0, RANGE_NOISE_M, rows) + rng.exponential(1.0, rows) * pen)
+    pen = np.where(ground, _GRASS_M / sin_graze, pen)
+    depth = np.minimum(rng.exponential(1.0, rows) * pen, 2.0)  # at most 2 m behind the surface
+    r = r + valid * (rng.normal(0.0, RANGE_NOISE_M, rows) + depth)
     r = np.where(valid, np.maximum(r, 0.05), 0.0)
     points = _to_points(dirs, r).astype(np.float64)
     valid &= np.any(points != 0.0, axis=1)
