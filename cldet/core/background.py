@@ -12,7 +12,8 @@ of* that environment along a ray. The model is a static range image (pass 1, str
 2. Time is cut into bins of ``bin_s`` (1 s = 10 scans). For every cell and bin the model keeps
    the nearest range seen in that bin (inf when none).
 3. The cell's *static range* is the nearest range reached in at least ``min_bin_fraction``
-   (0.85) of the bins (the k-th smallest per-bin minimum, k = ceil(0.85 B)). A wall, the
+   (0.85) of the bins (the k-th smallest per-bin minimum, k = floor(0.85 B), at least 1: 5 of
+   6 bins, 17 of 20; rounding down forgives one sparsely sampled bin in a short sequence). A wall, the
    ground or a tree gives that range in every bin; a drone hovering in one place for half the
    sequence does not (it is there in ~half the bins), so it stays in front of the static range.
 4. A static object never floats: lamp posts, cars and trees stand on something. A small blob
@@ -25,7 +26,11 @@ of* that environment along a ray. The model is a static range image (pass 1, str
    (azimuth wraps), ``dilate_cells`` times. Foliage swaying by a few cm into the next cell,
    and beam divergence at edges, then stay background.
 6. A point is background when its range is not shorter than the static range by more than
-   ``max(margin_m, margin_fraction * range)`` (0.3 m, 3 %: range noise ~2 cm, foliage depth).
+   ``max(margin_m, margin_fraction * range, slack)`` (0.3 m, 3 %: range noise ~2 cm, foliage
+   depth). ``slack`` is half the smaller range step from the cell to the cells above and below
+   it: a surface seen at grazing incidence (the ground far out, the bottom row of the field of
+   view) spans about that much range within one cell, so its nearest return varies that much
+   from bin to bin.
    It is CORE background against the undilated static range, MARGIN when background only
    through dilation (a drone right next to static structure falls there), FOREGROUND otherwise.
 
@@ -103,14 +108,15 @@ def _classify_kernel(
     rng: NDArray[np.float32],
     static: NDArray[np.float32],
     dilated: NDArray[np.float32],
+    slack: NDArray[np.float32],
     margin_m: float,
     margin_fraction: float,
 ) -> NDArray[np.uint8]:
     n = cells.shape[0]
     out = np.zeros(n, dtype=np.uint8)
     for i in range(n):
-        limit = rng[i] + max(margin_m, margin_fraction * rng[i])
         c = cells[i]
+        limit = rng[i] + max(margin_m, margin_fraction * rng[i], slack[c])
         if limit >= static[c]:
             out[i] = 2
         elif limit >= dilated[c]:
@@ -223,6 +229,7 @@ class BackgroundModel:
         self._bin = -1
         self._zhist = np.zeros(int(round((_Z_HI - _Z_LO) / _Z_STEP)), dtype=np.int64)
         self._static: NDArray[np.float32] | None = None  # undilated static range per cell
+        self._slack = np.zeros(0, dtype=np.float32)  # extra margin per cell (grazing surfaces)
         self._dilated: NDArray[np.float32] | None = None
         self._ground_z: float | None = None
         self.n_frames = 0
@@ -259,11 +266,11 @@ class BackgroundModel:
             np.minimum(bins[-1], last, out=bins[-1])
         if bins:
             stack = np.sort(np.stack(bins), axis=0)
-            k = max(1, int(np.ceil(self.cfg.min_bin_fraction * len(bins) - 1e-9)))
+            k = max(1, int(np.floor(self.cfg.min_bin_fraction * len(bins) + 1e-9)))
             static = stack[k - 1].reshape(self._n_el, self._n_az)
         else:
             static = np.full((self._n_el, self._n_az), np.inf, dtype=np.float32)
-        self.floating_cells = 0
+        self._floating_cells = 0
         if self.cfg.floating_max_size_m > 0:
             floating = _floating_blobs(
                 static,
@@ -271,8 +278,17 @@ class BackgroundModel:
                 float(self.cfg.floating_max_range_m),
                 float(self.cfg.floating_max_size_m),
             )
-            self.floating_cells = int(floating.sum())
+            self._floating_cells = int(floating.sum())
             static = np.where(floating, np.float32(np.inf), static)
+        # grazing surfaces (the ground far out) span a range interval within one cell of about
+        # the range step to the next elevation row: half of the smaller vertical step
+        up = np.full_like(static, np.inf)
+        down = np.full_like(static, np.inf)
+        with np.errstate(invalid="ignore"):
+            up[:-1] = np.abs(static[1:] - static[:-1])
+            down[1:] = np.abs(static[1:] - static[:-1])
+        step = np.fmin(up, down)  # NaN (inf - inf) counts as missing
+        self._slack = np.where(np.isfinite(step), 0.5 * step, 0.0).astype(np.float32).ravel()
         dilated = static
         if self.cfg.dilate_cells > 0:
             size = 2 * self.cfg.dilate_cells + 1
@@ -289,6 +305,12 @@ class BackgroundModel:
         """Number of time bins counted (valid after the first ``classify``)."""
         self._freeze()
         return self._n_bins
+
+    @property
+    def floating_cells(self) -> int:
+        """Direction cells cleared as small floating blobs (valid after the first ``classify``)."""
+        self._freeze()
+        return self._floating_cells
 
     def ground_z(self) -> float:
         """Ground height in metres: the 2nd percentile of return heights within 30 m horizontally."""
@@ -312,7 +334,7 @@ class BackgroundModel:
             return np.zeros(0, dtype=np.uint8)
         cells, rng, _, _ = direction_cells(points, self.cfg.cell_deg)
         return _classify_kernel(
-            cells, rng, static, dilated, self.cfg.margin_m, self.cfg.margin_fraction
+            cells, rng, static, dilated, self._slack, self.cfg.margin_m, self.cfg.margin_fraction
         )
 
     def is_background(self, points: NDArray[np.floating]) -> NDArray[np.bool_]:

@@ -1,0 +1,102 @@
+"""Tests of the static background model on small ray-cast scenes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cldet.config import BackgroundConfig
+from cldet.core.background import CORE, FOREGROUND, BackgroundModel
+from tests.core.scene import GROUND_Z, Sphere, points_near, scan
+
+NS = 100_000_000  # 10 Hz
+
+
+POST = ((5.8, -4.2, GROUND_Z), (6.2, -3.8, 1.0))  # a post standing on the ground
+
+
+def _learn(frames: list[list[Sphere]], seed: int = 0, **cfg: float) -> BackgroundModel:
+    rng = np.random.default_rng(seed)
+    model = BackgroundModel(BackgroundConfig(**cfg))
+    for k, spheres in enumerate(frames):
+        model.observe(k * NS, scan(rng, spheres, boxes=[POST]))
+    return model
+
+
+def test_static_scene_is_background_and_a_newcomer_is_not() -> None:
+    model = _learn([[]] * 60)
+    rng = np.random.default_rng(99)
+    newcomer: Sphere = ((5.0, 2.0, 2.0), 0.3)
+    pts = scan(rng, [newcomer], n_rays=16000, boxes=[POST])
+    labels = model.classify(pts)
+    on_new = points_near(pts, newcomer[0], 0.35)
+    assert on_new.sum() >= 5
+    assert np.all(labels[on_new] == FOREGROUND)
+    assert np.mean(labels[~on_new] != FOREGROUND) > 0.995
+    assert model.n_bins == 6
+    assert model.ground_z() == pytest.approx(GROUND_Z, abs=0.1)
+
+
+def test_object_hovering_for_half_the_sequence_is_not_background() -> None:
+    hover: Sphere = ((6.0, -3.0, 2.0), 0.3)
+    frames = [[hover]] * 30 + [[]] * 30
+    model = _learn(frames)
+    pts = scan(np.random.default_rng(5), [hover], n_rays=16000, boxes=[POST])
+    on = points_near(pts, hover[0], 0.35)
+    assert on.sum() >= 5
+    assert np.all(model.classify(pts)[on] == FOREGROUND)
+
+
+def test_object_present_in_every_bin_is_background() -> None:
+    # a sphere resting on the wall (not floating) is environment even though small
+    box: Sphere = ((11.8, 0.0, 4.2), 0.25)
+    model = _learn([[box]] * 60)
+    pts = scan(np.random.default_rng(5), [box], n_rays=16000, boxes=[POST])
+    on = points_near(pts, box[0], 0.3)
+    assert on.sum() >= 2
+    assert np.all(model.classify(pts)[on] != FOREGROUND)
+
+
+def test_small_blob_floating_in_free_space_all_along_is_not_background() -> None:
+    # a drone hovering through the whole sequence, nothing static around it
+    drone: Sphere = ((5.0, 3.0, 2.5), 0.25)
+    model = _learn([[drone]] * 60)
+    assert model.floating_cells > 0
+    pts = scan(np.random.default_rng(5), [drone], n_rays=16000, boxes=[POST])
+    on = points_near(pts, drone[0], 0.3)
+    assert on.sum() >= 3
+    assert np.all(model.classify(pts)[on] == FOREGROUND)
+    # with the rule switched off it is learned as background
+    off = _learn([[drone]] * 60, floating_max_size_m=0.0)
+    assert np.all(off.classify(pts)[on] != FOREGROUND)
+
+
+def test_swaying_foliage_of_a_few_cm_is_background() -> None:
+    rng = np.random.default_rng(3)
+    base = rng.uniform([7.0, 3.0, 1.0], [8.5, 5.0, 3.0], (40, 3))  # a bush of 40 leaves
+    stem: Sphere = ((7.7, 4.0, -1.0), 0.6)  # attached to the ground
+
+    def bush(k: int) -> list[Sphere]:
+        sway = 0.04 * np.sin(0.7 * k + np.arange(len(base)))[:, None] * np.array([1.0, 0.6, 0.2])
+        return [stem] + [((*(c + s),), 0.12) for c, s in zip(base, sway, strict=True)]
+
+    model = _learn([bush(k) for k in range(60)])
+    pts = scan(np.random.default_rng(11), bush(77), n_rays=16000, boxes=[POST])
+    in_bush = np.all((pts > [6.8, 2.8, 0.8]) & (pts < [8.7, 5.2, 3.2]), axis=1)
+    assert in_bush.sum() >= 30
+    assert np.mean(model.classify(pts)[in_bush] != FOREGROUND) > 0.97
+
+
+def test_classify_empty_and_frozen_after_first_classify() -> None:
+    model = _learn([[]] * 12)
+    assert model.classify(np.zeros((0, 3), dtype=np.float32)).shape == (0,)
+    with pytest.raises(RuntimeError, match="frozen"):
+        model.observe(99 * NS, np.zeros((1, 3), dtype=np.float32))
+
+
+def test_core_against_the_wall() -> None:
+    model = _learn([[]] * 20)
+    pts = scan(np.random.default_rng(1))
+    wall = pts[:, 0] > 11.9
+    assert wall.sum() > 20
+    assert np.mean(model.classify(pts)[wall] == CORE) > 0.9
