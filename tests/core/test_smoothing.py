@@ -1,0 +1,75 @@
+"""Tests of the constant-velocity Kalman filter, the RTS smoother and the end extrapolation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cldet.core.smoothing import KalmanCV, extrapolate, rts_smooth
+
+
+def _trajectory(t: np.ndarray) -> np.ndarray:
+    """A smooth 3D flight: a slow turn and a climb (speeds of a few m/s)."""
+    return np.stack([8 * np.cos(0.3 * t), 8 * np.sin(0.3 * t), 2 + 0.5 * t], axis=1)
+
+
+def test_rts_on_a_known_trajectory_with_gaps() -> None:
+    rng = np.random.default_rng(0)
+    t = np.arange(0, 12, 0.1)
+    truth = _trajectory(t)
+    sigma = 0.1
+    z = truth + rng.normal(0, sigma, truth.shape)
+    gap = (t > 4.0) & (t < 5.5)  # 1.5 s unseen
+    drop = rng.random(len(t)) < 0.2  # and a fifth of the frames missing
+    z[gap | drop] = np.nan
+    sm = rts_smooth(t, z, np.full(len(t), sigma), q=2.0)
+    err = np.linalg.norm(sm.position - truth, axis=1)
+    seen = ~(gap | drop)
+    assert np.sqrt(np.mean(err[seen] ** 2)) < sigma  # better than one measurement
+    assert err[gap].max() < 0.5  # the gap is bridged, not held
+    assert sm.measured.sum() == seen.sum()
+    # the uncertainty grows inside the gap and is smallest where measured
+    assert sm.pos_var[gap].max() > 2 * np.median(sm.pos_var[seen])
+    # the velocity is recovered
+    v_true = np.gradient(truth, t, axis=0)
+    assert np.median(np.linalg.norm(sm.velocity - v_true, axis=1)) < 0.3
+
+
+def test_rts_extrapolates_before_the_first_measurement() -> None:
+    t = np.arange(0, 3, 0.1)
+    truth = np.stack([1.0 * t, np.zeros_like(t), np.ones_like(t)], axis=1)
+    z = truth.copy()
+    z[:10] = np.nan
+    sm = rts_smooth(t, z, np.full(len(t), 0.01), q=0.1)
+    np.testing.assert_allclose(sm.position[0], truth[0], atol=0.05)
+    assert sm.pos_var[0] > sm.pos_var[15]
+
+
+def test_rts_errors() -> None:
+    t = np.arange(3.0)
+    with pytest.raises(ValueError, match="at least one measurement"):
+        rts_smooth(t, np.full((3, 3), np.nan), np.ones(3), q=1.0)
+    with pytest.raises(ValueError, match="shapes"):
+        rts_smooth(t, np.zeros((2, 3)), np.ones(3), q=1.0)
+
+
+def test_kalman_update_reduces_uncertainty_and_nis() -> None:
+    kf = KalmanCV(np.zeros(3), 0.1, 5.0)
+    kf.predict(0.1, 1.0)
+    p_before = kf.P[0, 0]
+    nis = kf.update(np.array([0.1, 0.0, 0.0]), 0.1)
+    assert kf.P[0, 0] < p_before
+    assert nis == pytest.approx(0.01 / (p_before + 0.01))
+    kf.predict(-0.1, 1.0)  # backwards is allowed
+    assert np.all(np.isfinite(kf.x))
+
+
+def test_extrapolation_decays_the_velocity() -> None:
+    p, v, cov = np.zeros(3), np.array([2.0, 0.0, 0.0]), np.diag([0.01, 0.1])
+    near, var_near = extrapolate(p, v, cov, 0.1, q=1.0, tau_s=1.5)
+    far, var_far = extrapolate(p, v, cov, 30.0, q=1.0, tau_s=1.5)
+    back, _ = extrapolate(p, v, cov, -30.0, q=1.0, tau_s=1.5)
+    assert near[0] == pytest.approx(0.2, rel=0.05)  # like constant velocity at first
+    assert far[0] == pytest.approx(3.0, rel=1e-3)  # saturates at v * tau
+    assert back[0] == pytest.approx(-3.0, rel=1e-3)
+    assert var_far > var_near

@@ -1,0 +1,121 @@
+"""Tests of the candidate tracker and the whole-sequence selection on synthetic clusters."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cldet.config import TrackingConfig
+from cldet.core.selection import score_tracks, select_chain
+from cldet.core.tracking import CandidateTracker, ClusterTable
+
+GROUND = -1.5
+
+
+def _table(items: list[tuple[np.ndarray, float, int]]) -> ClusterTable:
+    """Clusters from (centroid, extent, n_points)."""
+    if not items:
+        return ClusterTable.from_clusters(())
+    return ClusterTable(
+        centroid=np.array([c for c, _, _ in items], dtype=np.float64),
+        extent=np.array([e for _, e, _ in items]),
+        n_points=np.array([n for _, _, n in items], dtype=np.int64),
+        n_mid360=np.array([n for _, _, n in items], dtype=np.int64),
+        n_avia=np.zeros(len(items), dtype=np.int64),
+    )
+
+
+def _run(tables: list[ClusterTable], cfg: TrackingConfig, dt: float = 0.1):  # type: ignore[no-untyped-def]
+    tracker = CandidateTracker(cfg)
+    for k, table in enumerate(tables):
+        tracker.step(k, k * dt, table)
+    times = np.arange(len(tables)) * dt
+    scored = score_tracks(tracker.records(), tables, times, GROUND, cfg)
+    return scored, select_chain(scored, cfg)
+
+
+def _drone(t: float) -> np.ndarray:
+    return np.array([10 + 2 * np.cos(0.4 * t), 5 * np.sin(0.4 * t), 4 + 0.3 * t])
+
+
+def test_drone_wins_over_person_bird_and_speckle() -> None:
+    rng = np.random.default_rng(0)
+    cfg = TrackingConfig()
+    tables = []
+    n = 120
+    for k in range(n):
+        t = k * 0.1
+        items: list[tuple[np.ndarray, float, int]] = []
+        if rng.random() < 0.5:  # a far drone: seen in half of the frames, 1-3 points
+            items.append((_drone(t) + rng.normal(0, 0.05, 3), 0.2, int(rng.integers(1, 4))))
+        # a person walking at 1.4 m/s, seen every frame, large and low
+        items.append(
+            (np.array([-6 + 1.4 * t, 3.0, GROUND + 1.0]) + rng.normal(0, 0.05, 3), 1.7, 30)
+        )
+        if 30 <= k < 60:  # a bird crossing fast and erratically
+            jink = rng.normal(0, 0.4, 3)
+            items.append((np.array([-20 + 14 * (t - 3), -8, 9 + np.sin(9 * t)]) + jink, 0.3, 2))
+        for _ in range(3):  # speckle
+            items.append((rng.uniform([-30, -30, -1], [30, 30, 10]), 0.0, 1))
+        tables.append(_table(items))
+    scored, chain = _run(tables, cfg)
+    assert chain
+    chosen = np.concatenate(
+        [
+            tr.positions[i0:i1] - np.array([_drone(tt) for tt in tr.times_s[i0:i1]])
+            for tr, i0, i1 in chain
+        ]
+    )
+    assert np.all(np.linalg.norm(chosen, axis=1) < 0.5)
+    n_det = sum(i1 - i0 for _, i0, i1 in chain)
+    assert n_det > 0.4 * n
+
+
+def test_chain_bridges_a_long_unseen_stretch() -> None:
+    cfg = TrackingConfig()
+    tables = []
+    for k in range(100):
+        t = k * 0.1
+        seen = not (3.0 <= t < 6.0)  # 3 s unseen: longer than max_miss_s, the track ends
+        items = [(_drone(t), 0.3, 5)] if seen else []
+        items.append((np.array([3.0, -3.0, 2.0 + 0.01 * k]), 0.2, 3))  # a static pole top
+        tables.append(_table(items))
+    scored, chain = _run(tables, cfg)
+    assert len(chain) == 2
+    first, second = chain[0][0], chain[1][0]
+    assert first.times_s[0] < 3.0 and second.times_s[0] >= 6.0
+    for tr, i0, i1 in chain:
+        truth = np.array([_drone(tt) for tt in tr.times_s[i0:i1]])
+        assert np.allclose(tr.positions[i0:i1], truth)
+
+
+def test_raw_points_keep_a_confirmed_mover_alive() -> None:
+    cfg = TrackingConfig()
+    tracker = CandidateTracker(cfg)
+    rng = np.random.default_rng(2)
+    stop = np.array([6.0, 2.0, 3.0])
+    for k in range(40):
+        t = k * 0.1
+        pos = stop + np.array([min(t - 1.0, 0.0) * 1.0, 0, 0])  # flies 1 m/s then hovers at stop
+        if t < 1.0:
+            table = _table([(pos, 0.3, 6)])
+            raw = np.zeros((0, 3))
+        else:  # learned as background: no cluster, only raw points
+            table = _table([])
+            raw = pos + rng.normal(0, 0.1, (6, 3))
+        tracker.step(k, t, table, raw)
+    (rec,) = [r for r in tracker.records() if len(r.frames) > 5]
+    assert rec.raw.sum() >= 25
+    assert np.linalg.norm(rec.positions[-1] - stop) < 0.2
+
+
+def test_raw_points_of_a_wall_do_not() -> None:
+    cfg = TrackingConfig()
+    tracker = CandidateTracker(cfg)
+    yy, zz = np.meshgrid(np.linspace(-3, 3, 40), np.linspace(0, 4, 30))
+    wall = np.stack([np.full(yy.size, 8.0), yy.ravel(), zz.ravel()], axis=1)
+    for k in range(30):
+        t = k * 0.1
+        pos = np.array([8.0 - 1.0 + t, 0.0, 2.0]) if t < 1.0 else None
+        table = _table([(pos, 0.3, 5)]) if pos is not None else _table([])
+        tracker.step(k, t, table, wall)
+    assert all(r.raw.sum() == 0 for r in tracker.records())
