@@ -14,6 +14,7 @@ Nothing holds more than one frame's raw points; what is kept per frame is the sm
 from __future__ import annotations
 
 import json
+import multiprocessing.context
 import time
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -58,7 +59,9 @@ class AnnotateReport:
 
     def describe(self) -> str:
         """One line for the terminal."""
-        parts = [f"{self.sequence}: {self.frames} frames in {self.seconds:.1f} s ({self.predictions_per_s:.0f}/s)"]
+        parts = [
+            f"{self.sequence}: {self.frames} frames in {self.seconds:.1f} s ({self.predictions_per_s:.0f}/s)"
+        ]
         parts.append(", ".join(f"{n} {k}" for k, n in self.sources.items() if n))
         if self.rms_error_m is not None:
             parts.append(f"RMS error {self.rms_error_m:.3f} m vs ground truth")
@@ -136,7 +139,9 @@ def annotate_log(
             progress.advance()
         result = estimator.finish()
         view.log_result(result, detections)
-        truth = list(iter_positions(log, topics.GROUND_TRUTH)) if found.get(topics.GROUND_TRUTH) else []
+        truth = (
+            list(iter_positions(log, topics.GROUND_TRUTH)) if found.get(topics.GROUND_TRUTH) else []
+        )
         rms = None
         if truth:
             truth_ns = np.array([t.stamp_ns for t in truth], dtype=np.int64)
@@ -231,7 +236,11 @@ def _clusters_writer(det: FrameDetections, chosen_id: int | None) -> Addition:
     def write(writer: LogWriter) -> None:
         cloud = np.column_stack([det.foreground, det.labels.astype(np.float32)])
         writer.write_cloud(
-            topics.FOREGROUND, det.stamp_ns, cloud, topics.FRAME_MID360, fields=("x", "y", "z", "cluster_id")
+            topics.FOREGROUND,
+            det.stamp_ns,
+            cloud,
+            topics.FRAME_MID360,
+            fields=("x", "y", "z", "cluster_id"),
         )
         others = [c for c in det.clusters if c.cluster_id != chosen_id]
         writer.write_scene_update(topics.CLUSTERS, det.stamp_ns, others, topics.FRAME_MID360)
@@ -253,39 +262,59 @@ def annotate_logs(
     logs: Sequence[Path],
     *,
     config: CldetConfig | None = None,
-    output: Path | None = None,
+    outputs: Sequence[Path] | None = None,
     write_rrd: bool = True,
     workers: int = 1,
     progress: Progress | None = None,
 ) -> tuple[list[AnnotateReport], list[tuple[Path, str]]]:
     """Annotate several logs, in parallel processes when ``workers > 1``.
 
-    One failing log is reported and the others still run. ``output`` is allowed with a single log.
+    One failing log is reported and the others still run.
+
+    Args:
+        logs: the MCAP logs.
+        config: the estimator configuration (defaults when None).
+        outputs: one output path per log (default: each log rewritten in place).
+        write_rrd: write a ``.rrd`` beside each output.
+        workers: processes; 1 runs in this process (with per-frame progress).
+        progress: one unit per frame (single worker) or per log (several).
 
     Returns:
-        (reports of the logs done, (log, error message) of those that failed).
+        (reports of the logs done, in the order given; (log, error message) of those that failed).
     """
-    if output is not None and len(logs) != 1:
-        raise CldetError(f"an output path goes with exactly one log, got {len(logs)} logs")
+    if outputs is not None and len(outputs) != len(logs):
+        raise CldetError(f"{len(outputs)} output paths for {len(logs)} logs")
+    targets = list(outputs) if outputs is not None else [Path(log) for log in logs]
     progress = progress or NullProgress()
-    reports: list[AnnotateReport] = []
+    done: dict[int, AnnotateReport] = {}
     failures: list[tuple[Path, str]] = []
-    progress.start(len(logs), "annotating")
     if workers <= 1 or len(logs) == 1:
-        for log in logs:
+        for i, log in enumerate(logs):
             try:
-                reports.append(annotate_log(log, config=config, output=output, write_rrd=write_rrd))
+                done[i] = annotate_log(
+                    log, config=config, output=targets[i], write_rrd=write_rrd, progress=progress
+                )
             except CldetError as err:
-                failures.append((log, str(err)))
-            progress.advance()
-        return reports, failures
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(annotate_log, log, config=config, write_rrd=write_rrd): log for log in logs}
+                failures.append((Path(log), str(err)))
+        return [done[i] for i in sorted(done)], failures
+    progress.start(len(logs), "annotating")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context()) as pool:
+        futures = {
+            pool.submit(annotate_log, log, config=config, output=targets[i], write_rrd=write_rrd): i
+            for i, log in enumerate(logs)
+        }
         for future in as_completed(futures):
+            i = futures[future]
             try:
-                reports.append(future.result())
+                done[i] = future.result()
             except CldetError as err:
-                failures.append((futures[future], str(err)))
+                failures.append((Path(logs[i]), str(err)))
             progress.advance()
-    reports.sort(key=lambda r: str(r.log))
-    return reports, failures
+    return [done[i] for i in sorted(done)], failures
+
+
+def _mp_context() -> multiprocessing.context.BaseContext:
+    """Fresh worker processes (forkserver): no inherited threads or open files."""
+    import multiprocessing
+
+    return multiprocessing.get_context("forkserver")

@@ -21,21 +21,41 @@ class Method(str, Enum):
 
 @app.command()
 def annotate(
-    logs: Annotated[list[Path], typer.Argument(help="MCAP logs written by `cldet convert`.", show_default=False)],
+    logs: Annotated[
+        list[Path], typer.Argument(help="MCAP logs written by `cldet convert`.", show_default=False)
+    ],
     method: Annotated[
-        Method | None, typer.Option(help="track (default: background + clustering + tracker + smoother) or cl-det (the report's baseline).")
+        Method | None,
+        typer.Option(
+            help="track (default: background + clustering + tracker + smoother) or cl-det (the report's baseline)."
+        ),
     ] = None,
     config: Annotated[
-        Path | None, typer.Option("--config", help="YAML file overriding the defaults; a misspelt key is an error.")
+        Path | None,
+        typer.Option(
+            "--config", help="YAML file overriding the defaults; a misspelt key is an error."
+        ),
     ] = None,
     output: Annotated[
-        Path | None, typer.Option("-o", "--output", help="Write the annotated log here instead of in place (one log only).")
+        Path | None,
+        typer.Option(
+            "-o",
+            "--output",
+            help="Write the annotated log here instead of in place (one log only).",
+        ),
     ] = None,
     rrd: Annotated[
-        Path | None, typer.Option(help="Rerun recording path (one log only); default: LOG.rrd beside the output.")
+        Path | None,
+        typer.Option(
+            help="Rerun recording path (one log only); default: LOG.rrd beside the output."
+        ),
     ] = None,
-    no_rrd: Annotated[bool, typer.Option("--no-rrd", help="Do not write the Rerun review recording.")] = False,
-    workers: Annotated[int, typer.Option(help="Logs annotated in parallel (default: all cores).")] = 0,
+    no_rrd: Annotated[
+        bool, typer.Option("--no-rrd", help="Do not write the Rerun review recording.")
+    ] = False,
+    workers: Annotated[
+        int, typer.Option(help="Logs annotated in parallel (default: all cores).")
+    ] = 0,
 ) -> None:
     """Estimate the drone's 3D position at every Mid-360 frame and add the results to each log.
 
@@ -61,11 +81,17 @@ def annotate(
             raise CldetError("-o/--output and --rrd go with exactly one log")
         with BarProgress() as bar:
             if len(logs) == 1:
-                reports = [annotate_log(logs[0], config=cfg, output=output, rrd=rrd, write_rrd=not no_rrd, progress=bar)]
-                failures: list[tuple[Path, str]] = []
+                report = annotate_log(
+                    logs[0], config=cfg, output=output, rrd=rrd, write_rrd=not no_rrd, progress=bar
+                )
+                reports, failures = [report], list[tuple[Path, str]]()
             else:
                 reports, failures = annotate_logs(
-                    logs, config=cfg, write_rrd=not no_rrd, workers=workers or os.cpu_count() or 1, progress=bar
+                    logs,
+                    config=cfg,
+                    write_rrd=not no_rrd,
+                    workers=workers or os.cpu_count() or 1,
+                    progress=bar,
                 )
         for report in reports:
             typer.echo(report.describe())

@@ -10,16 +10,12 @@ are dropped, so annotating twice replaces the earlier results instead of adding 
 from __future__ import annotations
 
 import heapq
-import struct
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mcap.exceptions import McapError
-from mcap.reader import make_reader
-
-from cldet.errors import LogError
+from cldet.io.mcap_read import LogReader, open_log
 from cldet.io.mcap_write import Compression, LogWriter, atomic_output
 
 Addition = Callable[[LogWriter], None]
@@ -61,36 +57,13 @@ def rewrite_log(
         LogError: the source cannot be read; the message names the file.
     """
     added = sorted(additions, key=lambda a: a[0])
-    with open(source, "rb") as src, atomic_output(target, overwrite=True) as out:
-        return _copy(src, out, source, added, metadata or {}, replace_prefix, set(replace_metadata))
-
-
-def _copy(
-    src: Any,
-    out: Any,
-    source: Path,
-    added: list[tuple[int, Addition]],
-    metadata: dict[str, dict[str, str]],
-    replace_prefix: str,
-    replace_metadata: set[str],
-) -> RewriteStats:
-    try:
-        reader = make_reader(src)
-        header = reader.get_header()
-        summary = reader.get_summary()
-    except Exception as err:  # the mcap reader raises struct.error, EOFError, McapError...
-        raise LogError(f"{source}: not a readable MCAP file ({err})") from err
-    if summary is None:
-        raise LogError(f"{source}: the MCAP file has no summary section (was it truncated?)")
-    compression = Compression.zstd
-    if summary.chunk_indexes:
-        compression = {"lz4": Compression.lz4, "": Compression.none}.get(
-            next(iter(summary.chunk_indexes)).compression, Compression.zstd
-        )
     copied = dropped = 0
-    with LogWriter(out, compression=compression, profile=header.profile) as writer:
-        try:
-            merged = heapq.merge(_source_messages(reader), _added(added), key=lambda item: item[0])
+    with open_log(source) as reader, atomic_output(target, overwrite=True) as out:
+        compression = {"lz4": Compression.lz4, "": Compression.none}.get(
+            reader.chunk_compression(), Compression.zstd
+        )
+        with LogWriter(out, compression=compression, profile=reader.header().profile) as writer:
+            merged = heapq.merge(_source(reader), added, key=lambda item: item[0])
             for _, payload in merged:
                 if callable(payload):
                     payload(writer)
@@ -103,22 +76,16 @@ def _copy(
                     schema, channel, message.log_time, message.publish_time, message.data
                 )
                 copied += 1
-            for record in reader.iter_metadata():
-                if record.name not in replace_metadata:
-                    writer.write_metadata(record.name, dict(record.metadata))
-            for name, values in metadata.items():
+            for name, values in reader.metadata_records():
+                if name not in replace_metadata:
+                    writer.write_metadata(name, values)
+            for name, values in (metadata or {}).items():
                 writer.write_metadata(name, values)
-            for attachment in reader.iter_attachments():
+            for attachment in reader.attachments():
                 writer.write_attachment(attachment)
-        except (McapError, EOFError, struct.error) as err:
-            raise LogError(f"{source}: the MCAP file is corrupt or truncated ({err})") from err
     return RewriteStats(copied, dropped, len(added))
 
 
-def _source_messages(reader: Any) -> Iterator[tuple[int, Any]]:
-    for schema, channel, message in reader.iter_messages(log_time_order=True):
+def _source(reader: LogReader) -> Iterator[tuple[int, Any]]:
+    for schema, channel, message in reader.iter_messages():
         yield message.log_time, (schema, channel, message)
-
-
-def _added(added: list[tuple[int, Addition]]) -> Iterator[tuple[int, Addition]]:
-    yield from added
