@@ -149,7 +149,7 @@ class RerunView:
 
         self.path = path
         self._tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-        self._rec = rr.RecordingStream("cldet", recording_id=recording_id or recording_name)
+        self._rec = rr.RecordingStream("cldet", recording_id=recording_id)  # None: a fresh id
         blueprint = rrb.Blueprint(
             rrb.Horizontal(
                 rrb.Spatial3DView(name="scene", origin="world"),

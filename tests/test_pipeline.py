@@ -1,0 +1,197 @@
+"""``annotate`` end to end: simulated sequence -> MCAP log -> results channels and Rerun recording."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from typer.testing import CliRunner
+
+from cldet.cli import app
+from cldet.config import CldetConfig
+from cldet.core import estimator as estimator_module
+from cldet.errors import ConfigError, LogError
+from cldet.io import topics
+from cldet.io.mcap_read import iter_estimates, list_topics, read_metadata
+from cldet.io.mcap_write import LogWriter
+from cldet.pipeline import annotate_log, annotate_logs
+from cldet.simulate import simulate_sequence
+from converters.mcap_convert import convert_sequence
+from converters.mmaud import find_sequences
+
+
+def _make_log(root: Path, seed: int, scenario: str = "mixed", duration_s: float = 4.0) -> Path:
+    data = root / f"data-{seed}"
+    simulate_sequence(
+        data / "train" / "seq0001",
+        seed=seed,
+        duration_s=duration_s,
+        scenario=scenario,
+        images=False,
+    )
+    (seq,) = find_sequences(data)
+    log = root / f"seq{seed}.mcap"
+    with open(log, "wb") as f, LogWriter(f) as writer:
+        convert_sequence(seq, writer)
+    return log
+
+
+def _messages(path: Path) -> list[tuple[str, int, int, bytes]]:
+    with open(path, "rb") as f:
+        return [
+            (c.topic, m.log_time, m.publish_time, m.data)
+            for _, c, m in make_reader(f).iter_messages(log_time_order=True)
+        ]
+
+
+@pytest.fixture(scope="module")
+def log_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("pipeline")
+
+
+@pytest.fixture(scope="module")
+def source_log(log_dir: Path) -> Path:
+    return _make_log(log_dir, seed=7101)
+
+
+def test_annotate_adds_result_channels_and_keeps_sources_byte_identical(
+    source_log: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "annotated.mcap"
+    report = annotate_log(source_log, output=out, write_rrd=False)
+    before = _messages(source_log)
+    after = _messages(out)
+    assert [m for m in after if not m[0].startswith("/cldet/")] == before
+    counts = list_topics(out)
+    n_frames = counts[topics.LIDAR_360]
+    assert report.frames == n_frames
+    for topic in (topics.ESTIMATE, topics.ESTIMATE_POSE, topics.FOREGROUND):
+        assert counts[topic] == n_frames, topic
+    assert counts[topics.TRAJECTORY] == 1
+    assert counts[topics.CLUSTERS] == 2 * n_frames  # the other clusters and the chosen one
+    estimates = [e for e, _ in iter_estimates(out)]
+    assert [e.stamp_ns for e in estimates] == [m[1] for m in before if m[0] == topics.LIDAR_360]
+    meta = read_metadata(out)[topics.METADATA_CONFIG]
+    assert meta["method"] == "track" and '"method": "track"' in meta["config"]
+    assert report.rms_error_m is not None and report.rms_error_m < 1.0
+
+
+def test_annotating_twice_replaces_the_earlier_results(source_log: Path, tmp_path: Path) -> None:
+    log = tmp_path / "log.mcap"
+    shutil.copy(source_log, log)
+    annotate_log(log, write_rrd=False)
+    first = list_topics(log)
+    annotate_log(log, config=CldetConfig(method="cl-det"), write_rrd=False)
+    assert list_topics(log) == first
+    assert read_metadata(log)[topics.METADATA_CONFIG]["method"] == "cl-det"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["log.mcap"]
+
+
+def test_a_failure_midway_leaves_the_log_intact_and_no_temporary_file(
+    source_log: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    log = tmp_path / "log.mcap"
+    shutil.copy(source_log, log)
+    original = log.read_bytes()
+    calls = {"n": 0}
+    real_process = estimator_module.TrackEstimator.process
+
+    def failing(self: estimator_module.TrackEstimator, frame):  # type: ignore[no-untyped-def]
+        calls["n"] += 1
+        if calls["n"] == 10:
+            raise RuntimeError("disk on fire")
+        return real_process(self, frame)
+
+    monkeypatch.setattr(estimator_module.TrackEstimator, "process", failing)
+    with pytest.raises(RuntimeError, match="disk on fire"):
+        annotate_log(log)
+    assert log.read_bytes() == original
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["log.mcap"]
+
+
+def test_a_log_without_lidar_is_refused_with_the_topics_it_has(tmp_path: Path) -> None:
+    log = tmp_path / "gt_only.mcap"
+    with open(log, "wb") as f, LogWriter(f) as writer:
+        writer.write_pose(topics.GROUND_TRUTH, 1_000, [0.0, 0.0, 1.0], topics.FRAME_MID360)
+    with pytest.raises(LogError, match=r"no /lidar_360 channel.*/ground_truth"):
+        annotate_log(log)
+
+
+def test_one_bad_log_among_good_ones_is_reported(source_log: Path, tmp_path: Path) -> None:
+    good = tmp_path / "good.mcap"
+    shutil.copy(source_log, good)
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap file")
+    reports, failures = annotate_logs([bad, good], write_rrd=False, workers=1)
+    assert [r.log for r in reports] == [good]
+    assert len(failures) == 1 and failures[0][0] == bad and "bad.mcap" in failures[0][1]
+
+
+def test_review_recording_has_the_entities_and_verifies(source_log: Path, tmp_path: Path) -> None:
+    import rerun as rr
+
+    out = tmp_path / "annotated.mcap"
+    report = annotate_log(source_log, output=out)
+    assert report.rrd == out.with_suffix(".rrd") and report.rrd.is_file()
+    paths = set(rr.chunk.RrdReader(report.rrd).store().schema().entity_paths())
+    expected = {
+        "/world/lidar/mid360",
+        "/world/lidar/avia",
+        "/world/foreground",
+        "/world/clusters",
+        "/world/drone/estimate",
+        "/world/drone/trajectory",
+        "/world/truth/trajectory",
+        "/plots/error_m",
+    }
+    assert expected <= paths, expected - paths
+    rerun = shutil.which("rerun")
+    if rerun is None:
+        pytest.skip("the rerun CLI is not on PATH")
+    done = subprocess.run(
+        [rerun, "rrd", "verify", str(report.rrd)], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+
+
+def test_cli_annotate_with_a_config_file(source_log: Path, tmp_path: Path) -> None:
+    log = tmp_path / "log.mcap"
+    shutil.copy(source_log, log)
+    good = tmp_path / "good.yaml"
+    good.write_text("method: cl-det\n")
+    result = CliRunner().invoke(app, ["annotate", str(log), "--config", str(good), "--no-rrd"])
+    assert result.exit_code == 0, result.output
+    assert "seq0001" in result.output
+    assert read_metadata(log)[topics.METADATA_CONFIG]["method"] == "cl-det"
+    typo = tmp_path / "typo.yaml"
+    typo.write_text("methd: track\n")
+    result = CliRunner().invoke(app, ["annotate", str(log), "--config", str(typo), "--no-rrd"])
+    assert result.exit_code == 1
+    assert "methd" in result.output and "typo.yaml" in result.output
+
+
+def test_config_errors_are_config_errors(tmp_path: Path) -> None:
+    from cldet.config import load_config
+
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("clustering:\n  eps_mm: 3\n")
+    with pytest.raises(ConfigError, match="eps_mm"):
+        load_config(bad)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [7301, 7302])
+def test_track_beats_cl_det_on_unseen_seeds(log_dir: Path, seed: int) -> None:
+    log = _make_log(log_dir, seed=seed, duration_s=5.0)
+    track = annotate_log(log, output=log_dir / f"t{seed}.mcap", write_rrd=False)
+    baseline = annotate_log(
+        log, config=CldetConfig(method="cl-det"), output=log_dir / f"c{seed}.mcap", write_rrd=False
+    )
+    assert track.rms_error_m is not None and baseline.rms_error_m is not None
+    assert track.rms_error_m < 0.6
+    assert track.rms_error_m < baseline.rms_error_m / 3
+    assert np.isfinite(track.rms_error_m)
