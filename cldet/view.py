@@ -116,22 +116,20 @@ class _CloudBuffer:
         if class_ids is not None:
             self.class_ids.append(class_ids)
 
-    def send(
-        self, rec: rr.RecordingStream, path: str, colour: tuple[int, int, int, int] | None
-    ) -> None:
+    def send(self, rec: rr.RecordingStream, path: str) -> None:
+        """Send the buffered frames as one column batch (colours come from static styling)."""
         import rerun as rr
 
         if not self.stamps:
             return
         lengths = [len(p) for p in self.points]
-        positions = np.concatenate(self.points) if self.points else np.zeros((0, 3), np.float32)
+        positions = np.concatenate(self.points)
         if self.class_ids:
             columns = rr.Points3D.columns(
                 positions=positions, class_ids=np.concatenate(self.class_ids)
             )
         else:
-            colours = np.tile(np.asarray(colour, np.uint8), (len(positions), 1))
-            columns = rr.Points3D.columns(positions=positions, colors=colours)
+            columns = rr.Points3D.columns(positions=positions)
         rec.send_columns(
             path, indexes=[_time_column(self.stamps)], columns=columns.partition(lengths)
         )
@@ -189,8 +187,16 @@ class RerunView:
             ),
             static=True,
         )
-        rec.log("world/lidar/mid360", rr.Points3D.from_fields(radii=0.02), static=True)
-        rec.log("world/lidar/avia", rr.Points3D.from_fields(radii=0.03), static=True)
+        rec.log(
+            "world/lidar/mid360",
+            rr.Points3D.from_fields(radii=0.02, colors=_MID360_COLOUR),
+            static=True,
+        )
+        rec.log(
+            "world/lidar/avia",
+            rr.Points3D.from_fields(radii=0.03, colors=_AVIA_COLOUR),
+            static=True,
+        )
         rec.log("world/foreground", rr.Points3D.from_fields(radii=0.06), static=True)
         rec.log(
             "plots/error_m", rr.SeriesLines(names="3D error (m)", colors=_TRACK_COLOUR), static=True
@@ -218,9 +224,9 @@ class RerunView:
     def _flush(self) -> None:
         import rerun as rr
 
-        self._mid360.send(self._rec, "world/lidar/mid360", _MID360_COLOUR)
-        self._avia.send(self._rec, "world/lidar/avia", _AVIA_COLOUR)
-        self._foreground.send(self._rec, "world/foreground", None)
+        self._mid360.send(self._rec, "world/lidar/mid360")
+        self._avia.send(self._rec, "world/lidar/avia")
+        self._foreground.send(self._rec, "world/foreground")
         if self._boxes:
             stamps = [b[0] for b in self._boxes]
             lengths = [len(b[1]) for b in self._boxes]
