@@ -106,7 +106,9 @@ class TrackingConfig(BaseModel):
         default=1.5, gt=0, description="a candidate track ends after this unseen"
     )
     static_spread_m: float = Field(
-        default=1.0, ge=0, description="a track whose detections all lie this close is static"
+        default=0.5,
+        ge=0,
+        description="a track whose detections (90 %) lie this close to their median is static",
     )
     cruise_speed: float = Field(
         default=8.0, gt=0, description="median speeds above this are less drone-like"

@@ -20,6 +20,9 @@ from cldet.types import Estimate, PositionSample, Source
 
 __all__ = ["apply_bias", "fit_bias"]
 
+_RIDGE = 1e-3  # relative ridge weight of the least-squares fit
+_OUTLIER_M = 1.0  # pairs farther apart than this after the fit are refitted without
+
 
 def _unit_rays(positions: NDArray[np.floating]) -> NDArray[np.float64]:
     p = np.asarray(positions, dtype=np.float64)
@@ -47,7 +50,9 @@ def fit_bias(
     Only estimates with ``source == DETECTED`` are used; the truth (in time order) is linearly
     interpolated at each detection stamp, and a detection is skipped when the two bracketing
     truth samples are more than ``max_truth_gap_ns`` apart or it lies outside the truth's span.
-    The detections should come from a run with zero bias.
+    The detections should come from a run with zero bias. The fit is least squares with a small
+    ridge (the ray and z coincide for a drone straight overhead), refitted up to twice without
+    pairs left more than 1 m apart (detections of something else).
 
     Raises:
         CldetError: fewer than two usable detection/truth pairs.
@@ -82,5 +87,17 @@ def fit_bias(
     design = np.zeros((3 * len(p), 2))
     design[:, 0] = u.ravel()
     design[2::3, 1] = 1.0
-    coef, *_ = np.linalg.lstsq(design, residual.ravel(), rcond=None)
+    keep = np.ones(len(p), dtype=bool)
+    coef = np.zeros(2)
+    for _ in range(3):  # refit without gross outliers (a detection of something else)
+        rows = np.repeat(keep, 3)
+        a, b = design[rows], residual.ravel()[rows]
+        # a little ridge: when the drone is straight above the sensor the ray and z coincide
+        # and the split between the two is arbitrary; take the smallest one
+        coef = np.linalg.solve(a.T @ a + _RIDGE * len(a) * np.eye(2), a.T @ b)
+        err = np.linalg.norm(residual - (u * coef[0] + np.array([0.0, 0.0, coef[1]])), axis=1)
+        new_keep = err <= _OUTLIER_M
+        if new_keep.sum() < 2 or np.array_equal(new_keep, keep):
+            break
+        keep = new_keep
     return BiasConfig(along_ray_m=float(coef[0]), z_m=float(coef[1]))

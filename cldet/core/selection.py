@@ -12,7 +12,8 @@ each detection weighted by per-detection evidence and the track's factors:
 * speed: factor 0.1 when the track's 90th-percentile filtered speed exceeds ``max_speed``
   (15 m/s); above ``cruise_speed`` (8 m/s: survey and filming flights are slower; a crossing
   bird is faster) the median speed lowers the factor linearly to 0.3 at ``max_speed``;
-  factor 0.3 when all its detections lie within ``static_spread_m`` (1 m) of each other: static
+  factor 0.3 when 90 % of its detections lie within ``static_spread_m`` (0.5 m) of their median
+  (sparse returns from different parts of one object scatter its centroid): static
   clutter (a lamp head, a leaf clump), or a drone hovering the whole time (kept when nothing
   else is there, but a real mover wins);
 * motion consistency: a detection whose NIS exceeds 7.81 (the 95 % point of chi^2, 3 dof)
@@ -92,7 +93,8 @@ def score_tracks(
                 factor *= 0.1
             elif v > cfg.cruise_speed:
                 factor *= 1.0 - 0.7 * (v - cfg.cruise_speed) / (cfg.max_speed - cfg.cruise_speed)
-        if float(np.max(np.ptp(pos, axis=0))) < cfg.static_spread_m:
+        centre = np.median(pos, axis=0)
+        if np.percentile(np.linalg.norm(pos - centre, axis=1), 90) < cfg.static_spread_m:
             factor *= 0.3
         factor *= 1.0 + 0.5 * float(np.mean(both))
         contribution = per_det * factor

@@ -1,0 +1,238 @@
+"""End-to-end tests of the estimator on simulated sequences (held-out seeds) and the real sample.
+
+Seeds 0-4 were used to develop the method (200-202 were looked at once); these tests use
+seeds 300-302. Errors are 3D
+distances to the ground truth (body centre + prism) interpolated at the Mid-360 stamps, with the
+default (zero) bias correction, so they include the LiDAR's near-face bias (~0.2-0.3 m).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cldet.config import load_config
+from cldet.core.estimator import (
+    FrameDetections,
+    SequenceEstimate,
+    TrackEstimator,
+    estimate_sequence,
+    fuse_points,
+)
+from cldet.core.frames import pair_frames
+from cldet.types import LidarFrame, PositionSample, Source
+
+simulate = pytest.importorskip("cldet.simulate")
+mmaud = pytest.importorskip("converters.mmaud")
+
+DURATION_S = 6.0
+HELD_OUT = (300, 301, 302)
+
+
+@dataclass(frozen=True)
+class Simulated:
+    frames: list[LidarFrame]
+    truth: list[PositionSample]
+    visible: np.ndarray  # (N,) drone points in the Mid-360 frame + paired Avia frame
+
+
+_CACHE: dict[tuple[str, int], Simulated] = {}
+
+
+def _simulated(root: Path, scenario: str, seed: int) -> Simulated:
+    key = (scenario, seed)
+    if key not in _CACHE:
+        seq_dir = root / f"{scenario}_{seed}" / "train" / "seq0001"
+        info = simulate.simulate_sequence(
+            seq_dir, seed=seed, duration_s=DURATION_S, scenario=scenario, images=False
+        )
+        (seq,) = mmaud.find_sequences(seq_dir.parents[1])
+        frames = list(
+            pair_frames(mmaud.iter_clouds(seq, "lidar_360"), mmaud.iter_clouds(seq, "livox_avia"))
+        )
+        truth = list(mmaud.iter_ground_truth(seq))
+        avia_pts = dict(
+            zip(info.avia_stamps_ns.tolist(), info.avia_drone_points.tolist(), strict=True)
+        )
+        mid_pts = dict(
+            zip(info.lidar_stamps_ns.tolist(), info.mid360_drone_points.tolist(), strict=True)
+        )
+        visible = np.array(
+            [mid_pts.get(f.stamp_ns, 0) + avia_pts.get(f.avia_stamp_ns or -1, 0) for f in frames]
+        )
+        _CACHE[key] = Simulated(frames, truth, visible)
+    return _CACHE[key]
+
+
+@pytest.fixture(scope="module")
+def sim_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("sim")
+
+
+def _errors(result: SequenceEstimate, truth: list[PositionSample]) -> np.ndarray:
+    gs = np.array([g.stamp_ns for g in truth])
+    gp = np.array([g.position for g in truth])
+    st = np.array([e.stamp_ns for e in result.estimates])
+    pos = np.array([e.position for e in result.estimates])
+    at = np.stack([np.interp(st, gs, gp[:, d]) for d in range(3)], axis=1)
+    return np.linalg.norm(pos - at, axis=1)
+
+
+def _rms(e: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(e**2)))
+
+
+def _run(
+    sim: Simulated, method: str = "track", **over: object
+) -> tuple[list[FrameDetections], SequenceEstimate]:
+    return estimate_sequence(lambda: sim.frames, load_config(overrides={"method": method, **over}))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "scenario", ["mixed", "close_pass", "hover", "avia_only", "person", "bird"]
+)
+def test_track_is_accurate_and_far_better_than_cldet(sim_root: Path, scenario: str) -> None:
+    track_rms, cldet_rms = [], []
+    for seed in HELD_OUT:
+        sim = _simulated(sim_root, scenario, seed)
+        _, tr = _run(sim)
+        _, cl = _run(sim, "cl-det")
+        track_rms.append(_rms(_errors(tr, sim.truth)))
+        cldet_rms.append(_rms(_errors(cl, sim.truth)))
+    # the median sequence: within the LiDAR's near-face bias (no bias correction) of the truth
+    assert np.median(track_rms) < 0.5, (track_rms, cldet_rms)
+    # far better on average (at 2-4 m cl-det's largest cluster is often the drone too)
+    assert np.mean(track_rms) * 3 < np.mean(cldet_rms), (track_rms, cldet_rms)
+    for t, c in zip(track_rms, cldet_rms, strict=True):
+        assert t < max(c, 1.0), (track_rms, cldet_rms)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", ["person", "bird"])
+def test_distractors_do_not_pull_the_track_off_the_drone(sim_root: Path, scenario: str) -> None:
+    for seed in HELD_OUT:
+        sim = _simulated(sim_root, scenario, seed)
+        _, result = _run(sim)
+        err = _errors(result, sim.truth)
+        seen = sim.visible > 0
+        if seen.sum() < 10:
+            continue  # the drone is (nearly) invisible: nothing to hold on to
+        assert np.mean(err[seen] < 1.0) > 0.9, (seed, np.round(err, 2))
+
+
+@pytest.mark.slow
+def test_hovering_drone_is_not_erased(sim_root: Path) -> None:
+    for seed in HELD_OUT:
+        sim = _simulated(sim_root, "hover", seed)
+        _, result = _run(sim)
+        err = _errors(result, sim.truth)
+        detected = np.array([e.source == Source.DETECTED for e in result.estimates])
+        seen = sim.visible > 0
+        assert np.mean(detected[seen]) > 0.8, seed
+        assert np.mean(err[seen] < 0.5) > 0.9, (seed, np.round(err, 2))
+        # ... whereas without the floating-blob rule and the raw-point gate it is lost
+        _, blind = _run(sim, background={"floating_max_size_m": 0.0}, tracking={"raw_gate_m": 0.0})
+        blind_detected = np.array([e.source == Source.DETECTED for e in blind.estimates])
+        assert np.mean(blind_detected[seen]) < np.mean(detected[seen])
+
+
+@pytest.mark.slow
+def test_avia_only_phases_are_tracked(sim_root: Path) -> None:
+    for seed in HELD_OUT:
+        sim = _simulated(sim_root, "avia_only", seed)
+        assert all(f.mid360 is not None for f in sim.frames)
+        _, result = _run(sim)
+        err = _errors(result, sim.truth)
+        detected = np.array([e.source == Source.DETECTED for e in result.estimates])
+        seen = sim.visible > 0
+        assert np.mean(detected[seen]) > 0.7, seed
+        assert _rms(err) < 0.5, (seed, np.round(err, 2))
+
+
+@pytest.mark.slow
+def test_frame_detections_and_sequence_estimate_contract(sim_root: Path) -> None:
+    sim = _simulated(sim_root, "person", HELD_OUT[0])
+    cfg = load_config()
+    dets, result = estimate_sequence(lambda: sim.frames, cfg)
+    assert len(dets) == len(result.estimates) == len(sim.frames)
+    stamps = [e.stamp_ns for e in result.estimates]
+    assert stamps == [f.stamp_ns for f in sim.frames]
+    for frame, det in zip(sim.frames, dets, strict=True):
+        assert det.stamp_ns == frame.stamp_ns
+        assert det.labels.shape == (len(det.foreground),)
+        assert det.foreground.dtype == np.float32 and det.foreground.shape[1:] == (3,)
+        fused, _ = fuse_points(frame, cfg)
+        if len(det.foreground):  # foreground is a subset of the frame's points
+            d = np.min(np.linalg.norm(det.foreground[:, None] - fused[None], axis=2), axis=1)
+            assert d.max() == 0.0
+        assert [c.cluster_id for c in det.clusters] == list(range(len(det.clusters)))
+        assert sum(c.n_points for c in det.clusters) == int((det.labels >= 0).sum())
+    by_stamp = {d.stamp_ns: d for d in dets}
+    for stamp, cid in result.chosen.items():
+        assert 0 <= cid < len(by_stamp[stamp].clusters)
+    for e in result.estimates:
+        assert e.position.shape == (3,) and np.all(np.isfinite(e.position))
+        assert np.isfinite(e.sigma_m) and e.sigma_m >= 0
+        assert e.source in (Source.DETECTED, Source.PREDICTED, Source.SMOOTHED)
+        assert (e.n_points > 0) == (e.source == Source.DETECTED)
+    assert [ev.stamp_ns for ev in result.events] == sorted(ev.stamp_ns for ev in result.events)
+    assert result.events[0].kind in ("acquired", "predicted")
+    # deterministic
+    _, again = estimate_sequence(lambda: sim.frames, cfg)
+    assert [e.position.tolist() for e in again.estimates] == [
+        e.position.tolist() for e in result.estimates
+    ]
+
+
+@pytest.mark.slow
+def test_track_core_is_fast(sim_root: Path) -> None:
+    sim = _simulated(sim_root, "mixed", HELD_OUT[0])
+    _run(sim)  # compile and warm up
+    t0 = time.perf_counter()
+    _run(sim)
+    rate = len(sim.frames) / (time.perf_counter() - t0)
+    assert rate > 200  # ~1000 frames/s on one idle core; lenient for a loaded CI machine
+
+
+def test_empty_sequence_and_no_candidate() -> None:
+    cfg = load_config()
+    est = TrackEstimator(cfg)
+    assert est.finish().estimates == ()
+    # frames with nothing in them: no track at all, the configured fallback, flagged as such
+    empty = [
+        LidarFrame(k * 100_000_000, np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32))
+        for k in range(5)
+    ]
+    _, result = estimate_sequence(lambda: empty, cfg)
+    assert [e.source for e in result.estimates] == [Source.FALLBACK] * 5
+    np.testing.assert_allclose(result.estimates[0].position, cfg.tracking.fallback_position)
+
+
+def test_frames_out_of_order_are_an_error() -> None:
+    est = TrackEstimator(load_config())
+    f0 = LidarFrame(200, np.ones((1, 3), np.float32), np.zeros((0, 3), np.float32))
+    f1 = LidarFrame(100, np.ones((1, 3), np.float32), np.zeros((0, 3), np.float32))
+    est.observe(f0)
+    with pytest.raises(ValueError, match="out of order"):
+        est.observe(f1)
+
+
+def test_real_sample_close_to_the_first_place_estimate(real_sample: Path) -> None:
+    (seq,) = mmaud.find_sequences(real_sample, splits=["val"])
+    frames = list(
+        pair_frames(mmaud.iter_clouds(seq, "lidar_360"), mmaud.iter_clouds(seq, "livox_avia"))
+    )
+    reference = list(mmaud.iter_positions(real_sample / "reference" / "seq0001"))
+    _, result = estimate_sequence(lambda: frames, load_config())
+    stamps = np.array([e.stamp_ns for e in result.estimates])
+    pos = np.array([e.position for e in result.estimates])
+    d = [
+        np.linalg.norm(pos[np.argmin(np.abs(stamps - r.stamp_ns))] - r.position) for r in reference
+    ]
+    assert _rms(np.asarray(d)) < 0.2
+    assert all(e.source == Source.DETECTED for e in result.estimates)
