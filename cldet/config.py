@@ -118,7 +118,7 @@ class TrackingConfig(BaseModel):
         default=1.2, gt=0, description="clusters larger than this are not a drone"
     )
     min_height_m: float = Field(
-        default=1.5, description="centroids lower than this above ground: unlikely"
+        default=2.0, description="clusters reaching lower than this above ground: unlikely"
     )
     ground_z_m: float | None = Field(
         default=None, description="ground height; None = learn from background"

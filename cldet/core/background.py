@@ -74,6 +74,25 @@ def direction_cells(
     return cells, rng, n_el, n_az
 
 
+@numba.njit(cache=True, inline="always")
+def _atan2(y: float, x: float) -> float:
+    """atan2 by a minimax polynomial (max error ~2e-4 rad, 0.01 deg): 2 deg cells need no more."""
+    ax, ay = abs(x), abs(y)
+    mx, mn = max(ax, ay), min(ax, ay)
+    if mx == 0.0:
+        return 0.0
+    a = mn / mx
+    s = a * a
+    r = ((-0.0464964749 * s + 0.15931422) * s - 0.327622764) * s * a + a
+    if ay > ax:
+        r = 1.5707963267948966 - r
+    if x < 0.0:
+        r = 3.141592653589793 - r
+    if y < 0.0:
+        r = -r
+    return r
+
+
 @numba.njit(cache=True)
 def _cells_kernel(
     points: NDArray[np.float32], cell_deg: float, n_az: int, n_el: int
@@ -86,8 +105,8 @@ def _cells_kernel(
         x, y, z = float(points[i, 0]), float(points[i, 1]), float(points[i, 2])
         h = np.sqrt(x * x + y * y)
         rng[i] = np.sqrt(h * h + z * z)
-        ia = int((np.arctan2(y, x) + np.pi) * scale) % n_az
-        ie = int((np.arctan2(z, h) + np.pi / 2) * scale)
+        ia = int((_atan2(y, x) + np.pi) * scale) % n_az
+        ie = int((_atan2(z, h) + np.pi / 2) * scale)
         ie = min(max(ie, 0), n_el - 1)
         cells[i] = ie * n_az + ia
     return cells, rng

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Iterable, Iterator
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -73,6 +74,16 @@ def pair_frames(
             )
 
 
+@numba.njit(cache=True)
+def _keep_mask(p: NDArray[np.float32], min2: float, max2: float) -> NDArray[np.bool_]:
+    n = p.shape[0]
+    keep = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        r2 = p[i, 0] * p[i, 0] + p[i, 1] * p[i, 1] + p[i, 2] * p[i, 2]
+        keep[i] = np.isfinite(r2) and r2 > 0.0 and r2 >= min2 and r2 <= max2
+    return keep
+
+
 def valid_points(
     points: NDArray[np.floating], min_range_m: float = 0.0, max_range_m: float = np.inf
 ) -> NDArray[np.float32]:
@@ -80,11 +91,8 @@ def valid_points(
 
     Range is the distance from the Mid-360 origin, metres.
     """
-    p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
-    r2 = np.einsum("ij,ij->i", p, p)
-    keep = np.isfinite(r2) & (r2 > 0.0)
-    if min_range_m > 0:
-        keep &= r2 >= np.float32(min_range_m) ** 2
-    if np.isfinite(max_range_m):
-        keep &= r2 <= np.float32(max_range_m) ** 2
+    p = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
+    if len(p) == 0:
+        return p
+    keep = _keep_mask(p, float(min_range_m) ** 2, float(max_range_m) ** 2)
     return p if keep.all() else p[keep]

@@ -6,8 +6,10 @@ each detection weighted by per-detection evidence and the track's factors:
 
 * size: a detection whose cluster box is larger than ``max_size_m`` (1.2 m; the largest
   drones are ~0.8 m) weighs 0.1 (a person, a car, a branch);
-* height: a detection less than ``min_height_m`` (1.5 m) above the ground weighs 0.1 (a walking
-  person's visible centroid is ~0.9-1.2 m up; the drone flies higher nearly all the time);
+* height: a detection weighs 1 when its lowest point is at least ``min_height_m`` (2 m) above
+  the ground, falling linearly to 0.1 at 1 m lower: whatever the LiDAR sees of a walking
+  person lies below ~2 m (far away only the head and shoulders are hit), while the drone flies
+  higher nearly all the time (but may come down to a person's height);
 * raw: a detection from the raw-point gate (no cluster) weighs ``raw_weight`` (0.5);
 * speed: factor 0.1 when the track's 90th-percentile filtered speed exceeds ``max_speed``
   (15 m/s); above ``cruise_speed`` (8 m/s: survey and filming flights are slower; a crossing
@@ -73,13 +75,16 @@ def score_tracks(
         pos = rec.positions
         raw = rec.raw
         extent = np.zeros(h)
+        low = pos[:, 2].copy()
         both = np.zeros(h, dtype=bool)
         for k in np.flatnonzero(~raw):
             table, c = tables[rec.frames[k]], rec.clusters[k]
             extent[k] = table.extent[c]
+            low[k] = table.low_z()[c]
             both[k] = table.n_mid360[c] > 0 and table.n_avia[c] > 0
         per_det = np.where(extent <= cfg.max_size_m, 1.0, 0.1)
-        per_det *= np.where(pos[:, 2] - ground_z >= cfg.min_height_m, 1.0, 0.1)
+        lo_h, hi_h = cfg.min_height_m - 1.0, cfg.min_height_m
+        per_det *= np.clip((low - ground_z - lo_h) / (hi_h - lo_h), 0.1, 1.0)
         per_det *= np.where(raw, cfg.raw_weight, 1.0)
         # motion consistency: a detection far outside the constant-velocity prediction
         # (NIS above the 95 % point of chi^2 with 3 dof) is down-weighted smoothly

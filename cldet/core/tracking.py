@@ -13,8 +13,9 @@ whole-sequence evidence. Per frame:
 3. one-to-one assignment minimising the summed NIS (Hungarian, ``scipy``);
 4. unassigned clusters start new tracks (zero velocity, speed sigma ``init_speed_sigma``);
 5. a track not updated for ``max_miss_s`` ends;
-6. a confirmed track (>= ``raw_min_cluster_hits`` cluster detections spread over at least
-   ``raw_min_spread_m``: it has moved) that got no cluster searches the frame's raw points,
+6. a confirmed drone-sized track (>= ``raw_min_cluster_hits`` cluster detections spread over
+   at least ``raw_min_spread_m``: it has moved; its last cluster no larger than ``max_size_m``)
+   that got no cluster searches the frame's raw points,
    background included, within ``raw_gate_m`` of its prediction: a drone that stops right at
    static structure (hovering over a car) is learned as background but must not vanish.
 
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
@@ -45,6 +47,11 @@ class ClusterTable:
     n_points: NDArray[np.int64]  # (K,)
     n_mid360: NDArray[np.int64]  # (K,)
     n_avia: NDArray[np.int64]  # (K,)
+    lower_z: NDArray[np.float64] | None = None  # (K,) lowest point, metres (None: centroid z)
+
+    def low_z(self) -> NDArray[np.float64]:
+        """(K,) z of each cluster's lowest point (its centroid z when unknown)."""
+        return self.centroid[:, 2] if self.lower_z is None else self.lower_z
 
     @staticmethod
     def from_clusters(clusters: tuple[Cluster, ...]) -> ClusterTable:
@@ -52,13 +59,14 @@ class ClusterTable:
         k = len(clusters)
         if k == 0:
             z = np.zeros(0, dtype=np.int64)
-            return ClusterTable(np.zeros((0, 3)), np.zeros(0), z, z, z)
+            return ClusterTable(np.zeros((0, 3)), np.zeros(0), z, z, z, np.zeros(0))
         return ClusterTable(
             centroid=np.array([c.centroid for c in clusters], dtype=np.float64),
             extent=np.array([float(np.max(c.upper - c.lower)) for c in clusters]),
             n_points=np.array([c.n_points for c in clusters], dtype=np.int64),
             n_mid360=np.array([c.n_mid360 for c in clusters], dtype=np.int64),
             n_avia=np.array([c.n_avia for c in clusters], dtype=np.int64),
+            lower_z=np.array([float(c.lower[2]) for c in clusters]),
         )
 
     def __len__(self) -> int:
@@ -92,11 +100,19 @@ class _Hits:
     nis: list[float] = field(default_factory=list)
     speed: list[float] = field(default_factory=list)
     n_cluster_hits: int = 0
+    last_extent: float = 0.0
     lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
     upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
 
     def add(
-        self, frame: int, cluster: int, pos: NDArray[np.float64], n: int, nis: float, speed: float
+        self,
+        frame: int,
+        cluster: int,
+        pos: NDArray[np.float64],
+        n: int,
+        nis: float,
+        speed: float,
+        extent: float = 0.0,
     ) -> None:
         self.frames.append(frame)
         self.clusters.append(cluster)
@@ -106,12 +122,14 @@ class _Hits:
         self.speed.append(speed)
         if cluster >= 0:
             self.n_cluster_hits += 1
+            self.last_extent = extent
             np.minimum(self.lower, pos, out=self.lower)
             np.maximum(self.upper, pos, out=self.upper)
 
-    def may_use_raw(self, min_hits: int, min_spread_m: float) -> bool:
+    def may_use_raw(self, min_hits: int, min_spread_m: float, max_size_m: float) -> bool:
         return (
             self.n_cluster_hits >= min_hits
+            and self.last_extent <= max_size_m
             and float(np.max(self.upper - self.lower)) >= min_spread_m
         )
 
@@ -186,6 +204,7 @@ class CandidateTracker:
                             int(table.n_points[j]),
                             float(nis[i, j]),
                             float(speeds[a]),
+                            float(table.extent[j]),
                         )
                     assigned[cols] = True
                     updated[rows] = True
@@ -201,7 +220,15 @@ class CandidateTracker:
             self._next_id += m
             for tid, j in zip(ids, new, strict=True):
                 hits = _Hits()
-                hits.add(frame_index, int(j), z[j], int(table.n_points[j]), float("nan"), 0.0)
+                hits.add(
+                    frame_index,
+                    int(j),
+                    z[j],
+                    int(table.n_points[j]),
+                    float("nan"),
+                    0.0,
+                    float(table.extent[j]),
+                )
                 self._hits[int(tid)] = hits
             self._x = np.concatenate([self._x, x])
             self._P = np.concatenate([self._P, P])
@@ -223,7 +250,7 @@ class CandidateTracker:
             return
         for i in missed:
             hits = self._hits[int(self._ids[i])]
-            if not hits.may_use_raw(cfg.raw_min_cluster_hits, cfg.raw_min_spread_m):
+            if not hits.may_use_raw(cfg.raw_min_cluster_hits, cfg.raw_min_spread_m, cfg.max_size_m):
                 continue
             # where it would be: the constant-velocity prediction, or stopped where it was last
             # seen (a drone braking to hover)
@@ -260,6 +287,29 @@ class CandidateTracker:
         ]
 
 
+@numba.njit(cache=True)
+def _blob_kernel(
+    raw: NDArray[np.float32], centre: NDArray[np.float64], gate_m: float
+) -> tuple[int, int, NDArray[np.float64]]:
+    g2 = gate_m * gate_m
+    n_in = 0
+    n_shell = 0
+    acc = np.zeros(3)
+    for i in range(raw.shape[0]):
+        dx = raw[i, 0] - centre[0]
+        dy = raw[i, 1] - centre[1]
+        dz = raw[i, 2] - centre[2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 <= g2:
+            n_in += 1
+            acc[0] += raw[i, 0]
+            acc[1] += raw[i, 1]
+            acc[2] += raw[i, 2]
+        elif d2 <= 4.0 * g2 and dz >= -0.5 * gate_m:
+            n_shell += 1
+    return n_in, n_shell, acc
+
+
 def _isolated_blob(
     raw: NDArray[np.floating], centre: NDArray[np.float64], gate_m: float
 ) -> tuple[NDArray[np.float64], int] | None:
@@ -269,13 +319,8 @@ def _isolated_blob(
     gate itself, ignoring what lies below (a car roof, a lamp post under a hovering drone).
     A wall, a tree or the ground fails the test.
     """
-    d = raw - centre
-    d2 = np.einsum("ij,ij->i", d, d)
-    in_gate = d2 <= gate_m * gate_m
-    n_in = int(in_gate.sum())
-    if n_in == 0:
+    pts = np.ascontiguousarray(raw, dtype=np.float32)
+    n_in, n_shell, acc = _blob_kernel(pts, np.ascontiguousarray(centre, dtype=np.float64), gate_m)
+    if n_in == 0 or n_shell > n_in:
         return None
-    shell = (d2 > gate_m * gate_m) & (d2 <= 4 * gate_m * gate_m) & (d[:, 2] >= -0.5 * gate_m)
-    if int(shell.sum()) > n_in:
-        return None
-    return raw[in_gate].mean(axis=0).astype(np.float64), n_in
+    return acc / n_in, int(n_in)
