@@ -222,6 +222,7 @@ def test_frames_out_of_order_are_an_error() -> None:
         est.observe(f1)
 
 
+@pytest.mark.filterwarnings("ignore:ignoring folders")  # the sample holds reference/ too
 def test_real_sample_close_to_the_first_place_estimate(real_sample: Path) -> None:
     (seq,) = mmaud.find_sequences(real_sample, splits=["val"])
     frames = list(
