@@ -13,15 +13,15 @@ of* that environment along a ray. The model is a static range image (pass 1, str
    the nearest range seen in that bin (inf when none).
 3. The cell's *static range* is the nearest range reached in at least ``min_bin_fraction``
    (0.85) of the bins (the k-th smallest per-bin minimum, k = floor(0.85 B), at least 1: 5 of
-   6 bins, 17 of 20; rounding down forgives one sparsely sampled bin in a short sequence). A wall, the
-   ground or a tree gives that range in every bin; a drone hovering in one place for half the
+   6 bins, 17 of 20; rounding down forgives one sparsely sampled bin in a short sequence).
+   A wall, the ground or a tree gives that range in every bin; a drone hovering in one place for half the
    sequence does not (it is there in ~half the bins), so it stays in front of the static range.
 4. A static object never floats: lamp posts, cars and trees stand on something. A small blob
    of static cells (3D extent at most ``floating_max_size_m``, nearer than
    ``floating_max_range_m``) whose neighbouring directions are all empty or far from it in
    range (by max(1 m, 10 % of its range)), and at most half of them nearer (occluding), is a
-   drone hovering through (nearly) the whole sequence, not environment: its cells are cleared. Blobs are the 8-connected cells whose static
-   ranges differ by at most max(0.5 m, 5 %).
+   drone hovering through (nearly) the whole sequence, not environment: its cells are cleared.
+   Blobs are the 8-connected cells whose static ranges differ by at most max(0.5 m, 5 %).
 5. Dilation: the static range is replaced by the minimum over the cell and its 8 neighbours
    (azimuth wraps), ``dilate_cells`` times. Foliage swaying by a few cm into the next cell,
    and beam divergence at edges, then stay background.

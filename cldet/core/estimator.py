@@ -18,12 +18,17 @@ offline). Memory stays small: per frame only the clusters are kept.
    included) within ``raw_gate_m`` of its prediction, so a drone stopping at static structure
    does not vanish;
 5. ``finish``: the drone's chain of tracks chosen by whole-sequence evidence
-   (``cldet.core.selection``); a forward-backward RTS smoother (``cldet.core.smoothing``) fills the gaps; before the
-   first and after the last detection the track's own motion is extrapolated, its velocity
-   decaying with time constant ``extrapolation_tau_s`` (a drone does not fly straight for
-   ever); the centroid bias correction (``cldet.core.bias``) is
+   (``cldet.core.selection``); a forward-backward RTS smoother (``cldet.core.smoothing``)
+   fills the gaps; before the first and after the last detection the track's own motion is
+   extrapolated, its velocity decaying with time constant ``extrapolation_tau_s`` (a drone
+   does not fly straight for ever); the centroid bias correction (``cldet.core.bias``) is
    applied last. Only when no candidate track exists at all is the configured fallback
    position used.
+
+Each estimate's source: DETECTED (the chosen track had a cluster, or raw points, in that
+frame; ``n_points`` is their count), SMOOTHED (between detections), PREDICTED (before the
+first or after the last detection), FALLBACK (no track at all). ``sigma_m`` is the smoother's
+per-axis 1-sigma position uncertainty (the model is isotropic).
 """
 
 from __future__ import annotations
