@@ -9,7 +9,7 @@ estimates made with zero bias and the training ground truth.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,7 +18,7 @@ from cldet.config import BiasConfig
 from cldet.errors import CldetError
 from cldet.types import Estimate, PositionSample, Source
 
-__all__ = ["apply_bias", "fit_bias"]
+__all__ = ["apply_bias", "fit_bias", "fit_bias_sequences"]
 
 _RIDGE = 1e-3  # relative ridge weight of the least-squares fit
 _OUTLIER_M = 1.0  # pairs farther apart than this after the fit are refitted without
@@ -40,43 +40,75 @@ def apply_bias(positions: NDArray[np.floating], bias: BiasConfig) -> NDArray[np.
     return out
 
 
-def fit_bias(
-    detections: Sequence[Estimate],
-    truth: Sequence[PositionSample],
-    max_truth_gap_ns: int = 200_000_000,
-) -> BiasConfig:
-    """Least-squares ``along_ray_m`` and ``z_m`` from detections and ground truth.
-
-    Only estimates with ``source == DETECTED`` are used; the truth (in time order) is linearly
-    interpolated at each detection stamp, and a detection is skipped when the two bracketing
-    truth samples are more than ``max_truth_gap_ns`` apart or it lies outside the truth's span.
-    The detections should come from a run with zero bias. The fit is least squares with a small
-    ridge (the ray and z coincide for a drone straight overhead), refitted up to twice without
-    pairs left more than 1 m apart (detections of something else).
-
-    Raises:
-        CldetError: fewer than two usable detection/truth pairs.
-    """
+def _pairs(
+    detections: Sequence[Estimate], truth: Sequence[PositionSample], max_truth_gap_ns: int
+) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64]]]:
+    """(detected position, interpolated truth) pairs of one sequence."""
+    used_p: list[NDArray[np.float64]] = []
+    used_t: list[NDArray[np.float64]] = []
     if not truth:
-        raise CldetError("fit_bias: no ground truth given")
+        return used_p, used_t
     t_ns = np.array([s.stamp_ns for s in truth], dtype=np.int64)
     order = np.argsort(t_ns, kind="stable")
     t_ns = t_ns[order]
     t_pos = np.array([truth[i].position for i in order], dtype=np.float64)
-    used_p, used_t = [], []
     for est in detections:
         if est.source != Source.DETECTED:
             continue
         k = int(np.searchsorted(t_ns, est.stamp_ns))
         if k < len(t_ns) and t_ns[k] == est.stamp_ns:
-            used_p.append(est.position)
+            used_p.append(np.asarray(est.position, dtype=np.float64))
             used_t.append(t_pos[k])
             continue
         if k == 0 or k == len(t_ns) or t_ns[k] - t_ns[k - 1] > max_truth_gap_ns:
             continue
         w = (est.stamp_ns - t_ns[k - 1]) / (t_ns[k] - t_ns[k - 1])
-        used_p.append(est.position)
+        used_p.append(np.asarray(est.position, dtype=np.float64))
         used_t.append((1 - w) * t_pos[k - 1] + w * t_pos[k])
+    return used_p, used_t
+
+
+def fit_bias(
+    detections: Sequence[Estimate],
+    truth: Sequence[PositionSample],
+    max_truth_gap_ns: int = 200_000_000,
+) -> BiasConfig:
+    """Least-squares ``along_ray_m`` and ``z_m`` from one sequence's detections and ground truth.
+
+    For a training set of several sequences use ``fit_bias_sequences``: stamps of different
+    sequences may overlap, so their truths must not be mixed. See ``fit_bias_sequences``.
+
+    Raises:
+        CldetError: no truth, or fewer than two usable detection/truth pairs.
+    """
+    if not truth:
+        raise CldetError("fit_bias: no ground truth given")
+    return fit_bias_sequences([(detections, truth)], max_truth_gap_ns)
+
+
+def fit_bias_sequences(
+    sequences: Iterable[tuple[Sequence[Estimate], Sequence[PositionSample]]],
+    max_truth_gap_ns: int = 200_000_000,
+) -> BiasConfig:
+    """Least-squares ``along_ray_m`` and ``z_m`` over several sequences' (detections, truth).
+
+    Only estimates with ``source == DETECTED`` are used; each sequence's truth is linearly
+    interpolated at its detection stamps, and a detection is skipped when the two bracketing
+    truth samples are more than ``max_truth_gap_ns`` apart or it lies outside the truth's span.
+    The detections should come from a run with zero bias. Pairs more than 1 m apart are dropped
+    (a detection of something else: the bias is a few tenths of a metre); the fit is least
+    squares with a small ridge (the ray and z coincide for a drone straight overhead), refitted
+    up to twice without pairs it leaves more than 1 m apart.
+
+    Raises:
+        CldetError: fewer than two usable detection/truth pairs.
+    """
+    used_p: list[NDArray[np.float64]] = []
+    used_t: list[NDArray[np.float64]] = []
+    for detections, truth in sequences:
+        p_seq, t_seq = _pairs(detections, truth, max_truth_gap_ns)
+        used_p += p_seq
+        used_t += t_seq
     if len(used_p) < 2:
         raise CldetError(
             f"fit_bias: only {len(used_p)} detected estimate(s) overlap the ground truth, need >= 2"
@@ -87,9 +119,15 @@ def fit_bias(
     design = np.zeros((3 * len(p), 2))
     design[:, 0] = u.ravel()
     design[2::3, 1] = 1.0
-    keep = np.ones(len(p), dtype=bool)
+    # a detection more than 1 m from the truth is of something else (the bias is a few tenths)
+    keep = np.linalg.norm(residual, axis=1) <= _OUTLIER_M
+    if keep.sum() < 2:
+        raise CldetError(
+            f"fit_bias: only {int(keep.sum())} of {len(p)} detections lie within {_OUTLIER_M} m "
+            "of the ground truth, need >= 2"
+        )
     coef = np.zeros(2)
-    for _ in range(3):  # refit without gross outliers (a detection of something else)
+    for _ in range(3):  # refit without pairs the fit leaves more than 1 m apart
         rows = np.repeat(keep, 3)
         a, b = design[rows], residual.ravel()[rows]
         # a little ridge: when the drone is straight above the sensor the ray and z coincide

@@ -38,6 +38,11 @@ def test_fit_bias_recovers_known_offsets() -> None:
         Estimate(int(s), p, Source.DETECTED, 5, 0.1) for s, p in zip(est_stamps, seen, strict=True)
     ]
     dets.append(Estimate(int(est_stamps[3]), np.array([99.0, 99, 99]), Source.PREDICTED, 0, 9.0))
+    # a few detections of something else, metres away
+    dets += [
+        Estimate(int(s) + 1, p + 5.0, Source.DETECTED, 2, 0.1)
+        for s, p in zip(est_stamps[:9], seen[:9], strict=True)
+    ]
     bias = fit_bias(dets, truth)
     assert bias.along_ray_m == pytest.approx(0.2, abs=0.02)
     assert bias.z_m == pytest.approx(0.15, abs=0.02)
@@ -52,3 +57,6 @@ def test_fit_bias_needs_overlapping_detections() -> None:
         fit_bias(far, truth)
     with pytest.raises(CldetError, match="no ground truth"):
         fit_bias(far, [])
+    wrong = [Estimate(k * 10 * MS, np.full(3, 7.0), Source.DETECTED, 3, 0.1) for k in range(5)]
+    with pytest.raises(CldetError, match="within 1.0 m"):
+        fit_bias(wrong, truth)

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from cldet.config import load_config
+from cldet.core.bias import fit_bias_sequences
 from cldet.core.estimator import (
     FrameDetections,
     SequenceEstimate,
@@ -152,6 +153,26 @@ def test_avia_only_phases_are_tracked(sim_root: Path) -> None:
         seen = sim.visible > 0
         assert np.mean(detected[seen]) > 0.7, seed
         assert _rms(err) < 0.5, (seed, np.round(err, 2))
+
+
+@pytest.mark.slow
+def test_bias_fitted_on_training_seeds_helps_on_held_out(sim_root: Path) -> None:
+    pairs = []
+    for scenario in ("mixed", "close_pass", "hover"):
+        for seed in (0, 1):  # "training" sequences
+            sim = _simulated(sim_root, scenario, seed)
+            pairs.append((_run(sim)[1].estimates, sim.truth))
+    bias = fit_bias_sequences(pairs)
+    # the near face is nearer the sensor, the prism above the body: both push outwards / up
+    assert 0.0 < bias.z_m < 0.6 and -0.3 < bias.along_ray_m < 0.5, bias
+    before, after = [], []
+    for scenario in ("mixed", "close_pass"):
+        for seed in HELD_OUT:
+            sim = _simulated(sim_root, scenario, seed)
+            before.append(_rms(_errors(_run(sim)[1], sim.truth)))
+            after.append(_rms(_errors(_run(sim, bias=bias.model_dump())[1], sim.truth)))
+    assert np.median(after) < np.median(before), (before, after)
+    assert np.median(after) < 0.3, (before, after)
 
 
 @pytest.mark.slow
