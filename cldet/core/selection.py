@@ -125,6 +125,11 @@ def select_chain(
     """
     if not tracks:
         return []
+    # a track worth less than a link can only win alone: keep the best one of those
+    strong = [t for t in tracks if t.score >= _LINK_COST]
+    if not strong:
+        strong = [max(tracks, key=lambda t: (t.score, -t.record.track_id))]
+    tracks = strong
     order = sorted(
         range(len(tracks)), key=lambda i: (tracks[i].times_s[0], tracks[i].record.track_id)
     )
