@@ -11,6 +11,7 @@ import sys
 
 from cldet.commands import (  # noqa: F401  (each module registers its commands)
     annotate,
+    calibrate,
     convert,
     demo,
     results,

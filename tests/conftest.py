@@ -1,7 +1,8 @@
-"""Shared fixtures: the real challenge sample (skipped when absent)."""
+"""Shared fixtures: the real challenge sample (skipped when absent), simulated MCAP logs."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -18,3 +19,31 @@ def real_sample() -> Path:
             f"real MMAUD sample not found at {SAMPLE_ROOT} (expected ../shared/mmaud-sample)"
         )
     return SAMPLE_ROOT
+
+
+def simulated_log(root: Path, seed: int, scenario: str = "mixed", duration_s: float = 4.0) -> Path:
+    """Simulate one training sequence (with ground truth) under ``root`` and convert it to a log."""
+    from cldet.io.mcap_write import LogWriter
+    from cldet.simulate import simulate_sequence
+    from converters.mcap_convert import convert_sequence
+    from converters.mmaud import find_sequences
+
+    data = root / f"data-{seed}-{scenario}"
+    simulate_sequence(
+        data / "train" / "seq0001",
+        seed=seed,
+        duration_s=duration_s,
+        scenario=scenario,
+        images=False,
+    )
+    (seq,) = find_sequences(data)
+    log = root / f"seq{seed}-{scenario}.mcap"
+    with open(log, "wb") as f, LogWriter(f) as writer:
+        convert_sequence(seq, writer)
+    return log
+
+
+@pytest.fixture(scope="session")
+def make_log() -> Callable[..., Path]:
+    """``make_log(root, seed, scenario="mixed", duration_s=4.0)``: a simulated, converted log."""
+    return simulated_log

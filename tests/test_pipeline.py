@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import shutil
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -19,25 +20,6 @@ from cldet.io import topics
 from cldet.io.mcap_read import iter_estimates, list_topics, read_metadata
 from cldet.io.mcap_write import LogWriter
 from cldet.pipeline import annotate_log, annotate_logs
-from cldet.simulate import simulate_sequence
-from converters.mcap_convert import convert_sequence
-from converters.mmaud import find_sequences
-
-
-def _make_log(root: Path, seed: int, scenario: str = "mixed", duration_s: float = 4.0) -> Path:
-    data = root / f"data-{seed}"
-    simulate_sequence(
-        data / "train" / "seq0001",
-        seed=seed,
-        duration_s=duration_s,
-        scenario=scenario,
-        images=False,
-    )
-    (seq,) = find_sequences(data)
-    log = root / f"seq{seed}.mcap"
-    with open(log, "wb") as f, LogWriter(f) as writer:
-        convert_sequence(seq, writer)
-    return log
 
 
 def _messages(path: Path) -> list[tuple[str, int, int, bytes]]:
@@ -54,8 +36,8 @@ def log_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def source_log(log_dir: Path) -> Path:
-    return _make_log(log_dir, seed=7101)
+def source_log(log_dir: Path, make_log: Callable[..., Path]) -> Path:
+    return make_log(log_dir, seed=7101)
 
 
 def test_annotate_adds_result_channels_and_keeps_sources_byte_identical(
@@ -185,8 +167,10 @@ def test_config_errors_are_config_errors(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [7301, 7302])
-def test_track_beats_cl_det_on_unseen_seeds(log_dir: Path, seed: int) -> None:
-    log = _make_log(log_dir, seed=seed, duration_s=5.0)
+def test_track_beats_cl_det_on_unseen_seeds(
+    log_dir: Path, make_log: Callable[..., Path], seed: int
+) -> None:
+    log = make_log(log_dir, seed=seed, duration_s=5.0)
     track = annotate_log(log, output=log_dir / f"t{seed}.mcap", write_rrd=False)
     baseline = annotate_log(
         log, config=CldetConfig(method="cl-det"), output=log_dir / f"c{seed}.mcap", write_rrd=False
