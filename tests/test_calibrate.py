@@ -52,7 +52,7 @@ def test_cli_writes_a_config_that_annotate_accepts(train_logs: list[Path], tmp_p
 
 
 def test_refuses_logs_annotated_with_a_bias_or_not_annotated(
-    train_logs: list[Path], tmp_path: Path
+    train_logs: list[Path], tmp_path: Path, make_log: Callable[..., Path]
 ) -> None:
     biased = tmp_path / "biased.mcap"
     annotate_log(
