@@ -3,12 +3,15 @@
 The flow for one log (times are integer ns throughout):
 
 1. pass 1 streams the paired Mid-360/Avia frames into the estimator's background model;
-2. pass 2 streams them again through the per-frame verb (``process``), feeding the review view;
+2. pass 2 feeds them again through the per-frame verb (``process``) and the review view: from
+   memory when pass 1 could keep them (up to ``KEEP_FRAMES_BYTES`` of points, a few minutes of
+   recording), else streamed from the log a second time;
 3. ``finish`` associates, selects and smooths the drone's track over the whole sequence;
 4. the log is rewritten with the ``/cldet/*`` result channels (every source message copied byte
    for byte, earlier results replaced), atomically, and the ``.rrd`` renamed into place.
 
-Nothing holds more than one frame's raw points; what is kept per frame is the small foreground.
+Beyond that bound nothing holds more than one frame's raw points; what is kept per frame for the
+results is the small foreground.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from cldet.types import Cloud, Estimate, LidarFrame, Source
 from cldet.view import NullView, RerunView, View
 
 METADATA_ANNOTATE = topics.METADATA_CONFIG
+KEEP_FRAMES_BYTES = 128 * 2**20  # pass-1 points kept for pass 2 up to this; beyond, read again
 
 
 @dataclass(frozen=True)
@@ -126,13 +130,19 @@ def annotate_log(
         view = RerunView(rrd_path, recording_name=f"cldet {sequence}")
     try:
         estimator = make_estimator(config)
-        progress.start(2 * n_frames, f"{sequence}: background")
+        progress.start(2 * n_frames, f"{sequence}: background, then tracking")
+        kept: list[LidarFrame] | None = []  # pass-1 frames kept for pass 2 while small enough
+        kept_bytes = 0
         for frame in _frames(log, has_avia):
             estimator.observe(frame)
             progress.advance()
-        progress.start(2 * n_frames, f"{sequence}: tracking")
+            if kept is not None:
+                kept.append(frame)
+                kept_bytes += frame.mid360.nbytes + frame.avia.nbytes
+                if kept_bytes > KEEP_FRAMES_BYTES:
+                    kept = None  # a long sequence: pass 2 streams the log again
         detections: list[FrameDetections] = []
-        for frame in _frames(log, has_avia):
+        for frame in kept if kept is not None else _frames(log, has_avia):
             found_here = estimator.process(frame)
             detections.append(found_here)
             view.log_frame(frame, found_here)

@@ -179,3 +179,17 @@ def test_track_beats_cl_det_on_unseen_seeds(
     assert track.rms_error_m < 0.6
     assert track.rms_error_m < baseline.rms_error_m / 3
     assert np.isfinite(track.rms_error_m)
+
+
+def test_streaming_pass_two_gives_the_same_results_as_kept_frames(
+    source_log: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import cldet.pipeline
+
+    kept = tmp_path / "kept.mcap"
+    annotate_log(source_log, output=kept, write_rrd=False)
+    monkeypatch.setattr(cldet.pipeline, "KEEP_FRAMES_BYTES", 0)  # force a second read
+    streamed = tmp_path / "streamed.mcap"
+    annotate_log(source_log, output=streamed, write_rrd=False)
+    results = [[m for m in _messages(p) if m[0].startswith("/cldet/")] for p in (kept, streamed)]
+    assert results[0] == results[1] and results[0]
