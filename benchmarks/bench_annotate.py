@@ -8,7 +8,8 @@ Rerun recording) and the challenge scores (MSE both ways, RMSE, accuracy) agains
     python benchmarks/bench_annotate.py --preset small    # quicker
 
 Everything runs in this process, one log after another (one core); the numba kernels are
-compiled by a warm-up run on the first log before anything is timed.
+compiled by a warm-up run on the first log before anything is timed. The bias correction of
+``track+bias`` is fitted with ``cldet calibrate`` on the dataset's train split.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from cldet.calibrate import calibrate_logs
 from cldet.config import load_config
 from cldet.evaluate import evaluate_results
 from cldet.export import export_results
@@ -68,36 +70,49 @@ def main() -> None:
                     f"simulated preset {args.preset!r} (seed {args.seed}) in {time.perf_counter() - t0:.1f} s"
                 )
         report = convert_dataset(
-            data, work / "logs", splits=[args.split], workers=1, overwrite=True
+            data, work / "logs", splits=[args.split, "train"], workers=1, overwrite=True
         )
-        logs = sorted(report.converted)
-        print(f"converted {len(logs)} {args.split} sequences, {report.frames} messages")
+        logs = sorted(p for p in report.converted if p.parent.name == args.split)
+        train = sorted(p for p in report.converted if p.parent.name == "train")
+        print(f"converted {len(logs)} {args.split} and {len(train)} train sequences")
         truth = read_truth(data / f"{args.split}_truth.csv")
         query = data / f"{args.split}_timestamps.csv"
 
         annotate_log(logs[0], output=work / "warmup.mcap", write_rrd=True)  # numba compile
-        annotate_log(
-            logs[0], config=load_config(overrides={"method": "cl-det"}), output=work / "warmup.mcap"
-        )
+        cldet_config = load_config(overrides={"method": "cl-det"})
+        annotate_log(logs[0], config=cldet_config, output=work / "warmup.mcap")
 
+        # the bias correction is fitted on the train split (annotated with zero bias), never by hand
+        for log in train:
+            annotate_log(log, write_rrd=False)
+        calibration = calibrate_logs(train)
+        print(f"calibrated on train: {calibration.describe()}")
+        bias = {"bias": calibration.bias.model_dump()}
+
+        variants = [
+            ("track", "track+bias", True, bias),
+            ("track", "track+bias", False, bias),
+            ("track", "track", False, {}),
+            ("cl-det", "cl-det", True, {}),
+            ("cl-det", "cl-det", False, {}),
+        ]
         rows = []
         speed: dict[tuple[str, bool], float] = {}
-        for method in ("track", "cl-det"):
-            config = load_config(overrides={"method": method})
-            for rrd in (True, False):
-                out_dir = work / f"{method}-{'rrd' if rrd else 'nrrd'}"
-                out_dir.mkdir(exist_ok=True)
-                outputs = [out_dir / log.name for log in logs]
-                frames = 0
-                t0 = time.perf_counter()
-                for log, out in zip(logs, outputs, strict=True):
-                    frames += annotate_log(log, config=config, output=out, write_rrd=rrd).frames
-                seconds = time.perf_counter() - t0
-                speed[(method, rrd)] = frames / seconds
-                results = out_dir / "mmaud_results.csv"
-                export_results(outputs, results, query if query.exists() else None, overwrite=True)
-                ev = evaluate_results(results, truth)
-                rows.append((method, "yes" if rrd else "no", frames, seconds, frames / seconds, ev))
+        for method, label, rrd, extra in variants:
+            config = load_config(overrides={"method": method, **extra})
+            out_dir = work / f"{label}-{'rrd' if rrd else 'nrrd'}"
+            out_dir.mkdir(exist_ok=True)
+            outputs = [out_dir / log.name for log in logs]
+            frames = 0
+            t0 = time.perf_counter()
+            for log, out in zip(logs, outputs, strict=True):
+                frames += annotate_log(log, config=config, output=out, write_rrd=rrd).frames
+            seconds = time.perf_counter() - t0
+            speed[(label, rrd)] = frames / seconds
+            results = out_dir / "mmaud_results.csv"
+            export_results(outputs, results, query if query.exists() else None, overwrite=True)
+            ev = evaluate_results(results, truth)
+            rows.append((label, "yes" if rrd else "no", frames, seconds, frames / seconds, ev))
 
         print()
         print(
@@ -105,7 +120,7 @@ def main() -> None:
         )
         print(f"data: {data} ({args.split} split, {len(logs)} sequences)")
         header = (
-            f"{'method':<7} {'rrd':<4} {'frames':>6} {'seconds':>8} {'pred/s':>7} "
+            f"{'method':<10} {'rrd':<4} {'frames':>6} {'seconds':>8} {'pred/s':>7} "
             f"{'MSE/coord m^2':>13} {'MSD 3D m^2':>11} {'RMSE m':>8} {'p95 m':>7} {'max m':>7} {'acc':>5}"
         )
         print(header)
@@ -113,18 +128,19 @@ def main() -> None:
         for method, rrd_text, frames, seconds, rate, ev in rows:
             acc = "-" if ev.accuracy is None else f"{ev.accuracy:.2f}"
             print(
-                f"{method:<7} {rrd_text:<4} {frames:>6} {seconds:>8.2f} {rate:>7.0f} "
+                f"{method:<10} {rrd_text:<4} {frames:>6} {seconds:>8.2f} {rate:>7.0f} "
                 f"{ev.mse_per_coordinate_m2:>13.4f} {ev.mean_squared_distance_m2:>11.4f} {ev.rmse_m:>8.3f} "
                 f"{ev.p95_error_m:>7.3f} {ev.max_error_m:>7.3f} {acc:>5}"
             )
         track_mse = rows[0][5].mse_per_coordinate_m2
-        base_mse = rows[2][5].mse_per_coordinate_m2
+        base_mse = rows[3][5].mse_per_coordinate_m2
         print()
         print(
-            f"speed track / cl-det: {speed[('track', True)] / speed[('cl-det', True)]:.1f}x with .rrd, "
-            f"{speed[('track', False)] / speed[('cl-det', False)]:.1f}x without"
+            "speed track+bias / cl-det: "
+            f"{speed[('track+bias', True)] / speed[('cl-det', True)]:.1f}x with .rrd, "
+            f"{speed[('track+bias', False)] / speed[('cl-det', False)]:.1f}x without"
         )
-        print(f"MSE per coordinate cl-det / track: {base_mse / track_mse:.0f}x")
+        print(f"MSE per coordinate cl-det / track+bias: {base_mse / track_mse:.0f}x")
     finally:
         if args.keep is None:
             shutil.rmtree(work, ignore_errors=True)
