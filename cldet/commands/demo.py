@@ -23,8 +23,9 @@ def demo(
 ) -> None:
     """Run the whole job on a small simulated dataset and print both methods' scores.
 
-    Steps: `cldet simulate ROOT/data --preset small`, `cldet convert` of its test split,
-    `cldet annotate` with the `track` method and with the `cl-det` baseline, `cldet export` of
+    Steps: `cldet simulate ROOT/data --preset small`, `cldet convert` of its train and test
+    splits, `cldet annotate` + `cldet calibrate` on train (the bias correction), `cldet annotate`
+    of test with the `track` method (calibrated) and with the `cl-det` baseline, `cldet export` of
     each to a challenge mmaud_results.csv, and `cldet evaluate` against the simulator's truth.
     Ends with the path of a Rerun recording to open with `rerun`.
     """
@@ -35,6 +36,7 @@ def demo(
         report = run_demo(root, workers=workers or os.cpu_count() or 1, progress=bar)
     rows = comparison_rows(report)
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    typer.echo(f"\ntrack's {report.calibration.describe()}")
     typer.echo(f"\nScores on the simulated test split ({report.data}):\n")
     for k, row in enumerate(rows):
         typer.echo(
