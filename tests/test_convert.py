@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import io
 import shutil
-import struct
 import subprocess
 import tracemalloc
 import warnings
-import zlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -23,6 +21,7 @@ from typer.testing import CliRunner
 import cldet
 from cldet.io import LogReader, LogWriter, list_topics, open_log, read_metadata
 from cldet.io import topics as tp
+from cldet.simulate.sensors import encode_png
 from converters import mcap_convert, mmaud
 from converters.mcap_convert import convert_dataset, convert_sequence
 
@@ -31,19 +30,8 @@ CLOUD_DIRS = {"lidar_360": tp.LIDAR_360, "livox_avia": tp.LIVOX_AVIA, "radar_enh
 
 # --- building tiny datasets --------------------------------------------------------------------
 def make_png(width: int, height: int) -> bytes:
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return (
-            struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
-        )
-
-    raw = b"".join(b"\x00" + b"\x40" * (3 * width) for _ in range(height))
-    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
-    return (
-        b"\x89PNG\r\n\x1a\n"
-        + chunk(b"IHDR", ihdr)
-        + chunk(b"IDAT", zlib.compress(raw))
-        + chunk(b"IEND", b"")
-    )
+    """A real (tiny, uniform grey) RGB PNG."""
+    return encode_png(np.full((height, width, 3), 0x40, dtype=np.uint8))
 
 
 def stamp_names(start_s: int, n: int, period_us: int, offset_us: int = 0) -> list[str]:

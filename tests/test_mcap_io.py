@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import io
 import shutil
-import struct
 import subprocess
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -34,27 +32,15 @@ from cldet.io import (
     read_metadata,
 )
 from cldet.io import topics as tp
+from cldet.simulate.sensors import encode_png
 from cldet.types import Cluster, Estimate, Source
 
 T0 = 1_706_255_621_600_227_000  # 1706255621.600227 s
 
 
 def make_png(width: int, height: int) -> bytes:
-    """A real (tiny, grey) RGB PNG."""
-
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return (
-            struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
-        )
-
-    raw = b"".join(b"\x00" + b"\x80" * (3 * width) for _ in range(height))
-    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
-    return (
-        b"\x89PNG\r\n\x1a\n"
-        + chunk(b"IHDR", ihdr)
-        + chunk(b"IDAT", zlib.compress(raw))
-        + chunk(b"IEND", b"")
-    )
+    """A real (tiny, uniform grey) RGB PNG."""
+    return encode_png(np.full((height, width, 3), 0x80, dtype=np.uint8))
 
 
 def random_cloud(rng: np.random.Generator, n: int, k: int = 3) -> np.ndarray:
