@@ -120,6 +120,14 @@ class TrackingConfig(BaseModel):
     min_height_m: float = Field(
         default=2.0, description="clusters reaching lower than this above ground: unlikely"
     )
+    fov_bottom_deg: float = Field(
+        default=-7.3, ge=-90, le=0, description="bottom elevation of the Mid-360's field of view"
+    )
+    fov_cut_m: float = Field(
+        default=0.3,
+        ge=0,
+        description="clusters this close to the field's bottom may reach the ground (0: off)",
+    )
     ground_z_m: float | None = Field(
         default=None, description="ground height; None = learn from background"
     )

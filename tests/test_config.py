@@ -81,3 +81,10 @@ def test_config_to_dict_round_trips_through_json() -> None:
     assert data["bias"]["along_ray_m"] == 0.1
     assert data["tracking"]["fallback_position"] == [0.734, -9.739, 33.353]
     assert CldetConfig.model_validate(data) == cfg
+
+
+def test_field_of_view_cut_settings_are_validated() -> None:
+    cfg = load_config(overrides={"tracking": {"fov_cut_m": 0.0, "fov_bottom_deg": -7.0}})
+    assert cfg.tracking.fov_cut_m == 0.0
+    with pytest.raises(ConfigError, match="fov_bottom_deg"):
+        load_config(overrides={"tracking": {"fov_bottom_deg": 5.0}})

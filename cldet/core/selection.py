@@ -9,7 +9,13 @@ each detection weighted by per-detection evidence and the track's factors:
 * height: a detection weighs 1 when its lowest point is at least ``min_height_m`` (2 m) above
   the ground, falling linearly to 0.1 at 1 m lower: whatever the LiDAR sees of a walking
   person lies below ~2 m (far away only the head and shoulders are hit), while the drone flies
-  higher nearly all the time (but may come down to a person's height);
+  higher nearly all the time (but may come down to a person's height). A cluster whose lowest
+  point lies within ``fov_cut_m`` (0.3 m) of the bottom of the Mid-360's field of view at its
+  horizontal distance h (z = tan(``fov_bottom_deg``) * h in the sensor frame; -7.3 deg on the
+  real data) may extend below what is seen, so it counts as reaching the ground: a person
+  walking close past the sensor shows only the upper body (lowest visible point ~1.2 m above
+  the ground, extent < 1.2 m), like a small object floating at head height. A drone that low
+  and that close to the sensor weighed only 0.1 to ~0.4 anyway;
 * raw: a detection from the raw-point gate (no cluster) weighs ``raw_weight`` (0.5);
 * speed: factor 0.1 when the track's 90th-percentile filtered speed exceeds ``max_speed``
   (15 m/s); above ``cruise_speed`` (8 m/s: survey and filming flights are slower; a crossing
@@ -83,6 +89,11 @@ def score_tracks(
             low[k] = table.low_z()[c]
             both[k] = table.n_mid360[c] > 0 and table.n_avia[c] > 0
         per_det = np.where(extent <= cfg.max_size_m, 1.0, 0.1)
+        if cfg.fov_cut_m > 0:
+            # cut by the bottom of the field of view: it may reach down to the ground
+            horiz = np.hypot(pos[:, 0], pos[:, 1])
+            z_fov = np.tan(np.radians(cfg.fov_bottom_deg)) * horiz
+            low = np.where(low <= z_fov + cfg.fov_cut_m, ground_z, low)
         lo_h, hi_h = cfg.min_height_m - 1.0, cfg.min_height_m
         per_det *= np.clip((low - ground_z - lo_h) / (hi_h - lo_h), 0.1, 1.0)
         per_det *= np.where(raw, cfg.raw_weight, 1.0)

@@ -119,3 +119,44 @@ def test_raw_points_of_a_wall_do_not() -> None:
         table = _table([(pos, 0.3, 5)]) if pos is not None else _table([])
         tracker.step(k, t, table, wall)
     assert all(r.raw.sum() == 0 for r in tracker.records())
+
+
+def _with_low(items: list[tuple[np.ndarray, float, int, float]]) -> ClusterTable:
+    """Clusters from (centroid, extent, n_points, z of the lowest point)."""
+    table = _table([(c, e, n) for c, e, n, _ in items])
+    return ClusterTable(
+        centroid=table.centroid,
+        extent=table.extent,
+        n_points=table.n_points,
+        n_mid360=table.n_mid360,
+        n_avia=table.n_avia,
+        lower_z=np.array([z for _, _, _, z in items]),
+    )
+
+
+def test_person_cut_by_the_bottom_of_the_field_of_view_has_low_height_evidence() -> None:
+    # a person walking past 0.7 m from the sensor: the Mid-360 (bottom elevation -7.3 deg)
+    # sees only the upper body, whose lowest point sits on the field's bottom edge (~1.3 m
+    # above the ground here), and which is smaller than a large drone
+    tan_b = np.tan(np.radians(-7.3))
+    tables = []
+    for k in range(50):
+        t = 0.1 * k
+        person = np.array([0.7, -3.0 + 1.3 * t, 0.1])
+        z_cut = tan_b * np.hypot(person[0], person[1]) + 0.05
+        # a drone 9 m away at the same height, drifting slowly: not cut
+        drone = np.array([9.0 + 0.2 * np.sin(t), 1.0 + 0.3 * t, 0.1])
+        tables.append(_with_low([(person, 0.9, 20, z_cut), (drone, 0.5, 6, drone[2] - 0.15)]))
+    on = TrackingConfig()
+    off = TrackingConfig(fov_cut_m=0.0)
+    scored_on, chain_on = _run(tables, on)
+    scored_off, _ = _run(tables, off)
+
+    def score(scored, x: float) -> float:  # type: ignore[no-untyped-def]
+        return max(s.score for s in scored if abs(s.positions[0, 0] - x) < 1.0)
+
+    # the cut person weighs like something standing on the ground; the drone is unchanged
+    assert score(scored_on, 0.7) <= 0.1 * 49 + 1e-9
+    assert score(scored_on, 0.7) < 0.6 * score(scored_off, 0.7)
+    assert score(scored_on, 9.0) == score(scored_off, 9.0)
+    assert abs(chain_on[0][0].positions[0, 0] - 9.0) < 1.0
