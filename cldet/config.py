@@ -70,6 +70,10 @@ class BackgroundConfig(BaseModel):
         description="static blobs this small floating in free space are not background (0: off)",
     )
     floating_max_range_m: float = Field(default=30.0, gt=0, description="... when nearer than this")
+    release_caps: bool = Field(
+        default=True,
+        description="small static caps on a narrower column (a hover on a pole top) are not background",
+    )
     margin_fraction: float = Field(
         default=0.03, ge=0, lt=1, description="... or this fraction of range"
     )

@@ -22,6 +22,13 @@ of* that environment along a ray. The model is a static range image (pass 1, str
    range (by max(1 m, 10 % of its range)), and at most half of them nearer (occluding), is a
    drone hovering through (nearly) the whole sequence, not environment: its cells are cleared.
    Blobs are the 8-connected cells whose static ranges differ by at most max(0.5 m, 5 %).
+   A drone hovering on (or just above) a pole top through the whole sequence is range-continuous
+   with the pole, so it is not floating; neither is a lamp head. Both look like a small *cap*
+   (at most ``floating_max_size_m``, nearer than ``floating_max_range_m``) on top of a column at
+   least two cells narrower, with free space (empty, or behind it) all around the cap: such caps
+   are cleared too. Nothing static tells the two apart, so both become candidates for the
+   tracker, where a static candidate weighs 0.3 of a moving one: a lamp head cannot outscore a
+   drone that is seen moving, and a drone hovering all along is no longer erased.
 5. Dilation: the static range is replaced by the minimum over the cell and its 8 neighbours
    (azimuth wraps), ``dilate_cells`` times. Foliage swaying by a few cm into the next cell,
    and beam divergence at edges, then stay background.
@@ -234,6 +241,115 @@ def _floating_blobs(
     return out
 
 
+def _continuous(r: float, rn: float) -> bool:
+    """Two neighbouring static ranges belong to one surface (the blob continuity step)."""
+    return abs(rn - r) <= max(0.5, 0.05 * min(r, rn))
+
+
+def caps_on_columns(
+    static: NDArray[np.float32], cell_deg: float, max_range: float, max_size: float
+) -> NDArray[np.bool_]:
+    """Cells of small caps standing on a narrower column, free all around (module docstring, 4).
+
+    Candidate tops are runs of range-continuous static cells in one elevation row (at most six
+    cells, nearer than ``max_range``) with nothing range-continuous right above them. From each,
+    the cap grows down row by row (cells under it, one cell to either side) until a row at least
+    two cells narrower than the widest so far: that row must be continued by the row under it
+    (within max(1 m, 10 %): a pole thinner than a cell is sampled unevenly), the column the cap
+    stands on. The cap must be small (3D extent at most ``max_size``) and
+    every neighbouring direction outside the cap and the column's top must be empty or behind it.
+    A lamp head qualifies as well as a drone hovering on a pole top: releasing both makes them
+    weak (static) candidates for the tracker rather than erasing the drone.
+    """
+    n_el, n_az = static.shape
+    near = np.isfinite(static) & (static <= max_range)
+    out = np.zeros((n_el, n_az), dtype=bool)
+    deg = np.pi / 180.0
+
+    def linked(e: int, a: int, ee: int, aa: int) -> bool:
+        return (
+            0 <= ee < n_el
+            and bool(near[ee, aa])
+            and _continuous(float(static[e, a]), float(static[ee, aa]))
+        )
+
+    def below(run: list[int], e: int) -> list[int]:
+        """Cells of row e - 1 linked to the run in row e (same azimuth or one either side)."""
+        found = {
+            (a + da) % n_az
+            for a in run
+            for da in (-1, 0, 1)
+            if linked(e, a, e - 1, (a + da) % n_az)
+        }
+        return sorted(found)
+
+    def supported(run: list[int], e: int) -> bool:
+        """Row e - 1 continues the narrow row e under it (a pole sampled unevenly: 1 m / 10 %)."""
+        return any(
+            e >= 1
+            and near[e - 1, (a + da) % n_az]
+            and abs(float(static[e - 1, (a + da) % n_az]) - float(static[e, a]))
+            < max(1.0, 0.1 * float(static[e, a]))
+            for a in run
+            for da in (-1, 0, 1)
+        )
+
+    for e in range(n_el - 1, 0, -1):
+        row = np.flatnonzero(near[e])
+        if len(row) == 0:
+            continue
+        # runs of azimuth-adjacent, range-continuous cells in this row
+        runs: list[list[int]] = []
+        for a in row.tolist():
+            if runs and a == runs[-1][-1] + 1 and linked(e, runs[-1][-1], e, a):
+                runs[-1].append(a)
+            else:
+                runs.append([a])
+        for top in runs:
+            if len(top) > 6 or any(
+                linked(e, a, e + 1, (a + da) % n_az) for a in top for da in (-1, 0, 1)
+            ):
+                continue
+            cap = [(e, a) for a in top]
+            run, widest, row_e, column = top, len(top), e, None
+            for _ in range(6):
+                nxt = below(run, row_e)
+                if not nxt:
+                    break
+                if len(nxt) <= widest - 2:
+                    if supported(nxt, row_e - 1):
+                        column = [(row_e - 1, a) for a in nxt]
+                    break
+                cap += [(row_e - 1, a) for a in nxt]
+                run, widest, row_e = nxt, max(widest, len(nxt)), row_e - 1
+            if column is None:
+                continue
+            r_cap = np.array([static[c] for c in cap], dtype=np.float64)
+            el = (np.array([c[0] for c in cap]) + 0.5) * cell_deg * deg - np.pi / 2
+            az = (np.array([c[1] for c in cap]) + 0.5) * cell_deg * deg - np.pi
+            xyz = np.stack(
+                [
+                    r_cap * np.cos(el) * np.cos(az),
+                    r_cap * np.cos(el) * np.sin(az),
+                    r_cap * np.sin(el),
+                ]
+            )
+            if np.max(xyz.max(axis=1) - xyz.min(axis=1)) > max_size:
+                continue
+            allowed = set(cap) | set(column)
+            free = all(
+                not (np.isfinite(rn := float(static[ee, aa])) and rn <= r + max(0.5, 0.05 * r))
+                for (ce, ca), r in zip(cap, r_cap, strict=True)
+                for de in (-1, 0, 1)
+                for da in (-1, 0, 1)
+                if 0 <= (ee := ce + de) < n_el and (ee, aa := (ca + da) % n_az) not in allowed
+            )
+            if free:
+                for c in cap:
+                    out[c] = True
+    return out
+
+
 class BackgroundModel:
     """Static range image over a whole sequence: ``observe`` every frame, then ``classify``."""
 
@@ -290,6 +406,7 @@ class BackgroundModel:
         else:
             static = np.full((self._n_el, self._n_az), np.inf, dtype=np.float32)
         self._floating_cells = 0
+        self._cap_cells = 0
         if self.cfg.floating_max_size_m > 0:
             floating = _floating_blobs(
                 static,
@@ -299,6 +416,15 @@ class BackgroundModel:
             )
             self._floating_cells = int(floating.sum())
             static = np.where(floating, np.float32(np.inf), static)
+        if self.cfg.floating_max_size_m > 0 and self.cfg.release_caps:
+            caps = caps_on_columns(
+                static,
+                float(self.cfg.cell_deg),
+                float(self.cfg.floating_max_range_m),
+                float(self.cfg.floating_max_size_m),
+            )
+            self._cap_cells = int(caps.sum())
+            static = np.where(caps, np.float32(np.inf), static)
         # grazing surfaces (the ground far out) span a range interval within one cell of about
         # the range step to the next elevation row: half of the smaller vertical step
         up = np.full_like(static, np.inf)
@@ -330,6 +456,12 @@ class BackgroundModel:
         """Direction cells cleared as small floating blobs (valid after the first ``classify``)."""
         self._freeze()
         return self._floating_cells
+
+    @property
+    def cap_cells(self) -> int:
+        """Direction cells released as small caps on a column (valid after the first ``classify``)."""
+        self._freeze()
+        return self._cap_cells
 
     def ground_z(self) -> float:
         """Ground height in metres: the 2nd percentile of return heights within 30 m horizontally."""
