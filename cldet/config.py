@@ -70,6 +70,12 @@ class BackgroundConfig(BaseModel):
         description="static blobs this small floating in free space are not background (0: off)",
     )
     floating_max_range_m: float = Field(default=30.0, gt=0, description="... when nearer than this")
+    floating_any_range_above_deg: float = Field(
+        default=50.0,
+        ge=0,
+        le=90,
+        description="above this elevation (the Avia cone) floating blobs count at any range",
+    )
     release_caps: bool = Field(
         default=True,
         description="small static caps on a narrower column (a hover on a pole top) are not background",

@@ -18,7 +18,9 @@ of* that environment along a ray. The model is a static range image (pass 1, str
    sequence does not (it is there in ~half the bins), so it stays in front of the static range.
 4. A static object never floats: lamp posts, cars and trees stand on something. A small blob
    of static cells (3D extent at most ``floating_max_size_m``, nearer than
-   ``floating_max_range_m``) whose neighbouring directions are all empty or far from it in
+   ``floating_max_range_m``, or at any range above ``floating_any_range_above_deg`` of elevation:
+   high in the Avia cone the sky holds no small static things, and a drone hovering at 40 m stays
+   in one 2 deg cell all along) whose neighbouring directions are all empty or far from it in
    range (by max(1 m, 10 % of its range)), and at most half of them nearer (occluding), is a
    drone hovering through (nearly) the whole sequence, not environment: its cells are cleared.
    Blobs are the 8-connected cells whose static ranges differ by at most max(0.5 m, 5 %).
@@ -152,7 +154,7 @@ def _classify_kernel(
 
 @numba.njit(cache=True)
 def _floating_blobs(
-    static: NDArray[np.float32], cell_deg: float, max_range: float, max_size: float
+    static: NDArray[np.float32], cell_deg: float, max_range: float, max_size: float, cone_el: float
 ) -> NDArray[np.bool_]:
     """Cells of small static blobs floating in free space (see the module docstring, step 4)."""
     n_el, n_az = static.shape
@@ -200,10 +202,10 @@ def _floating_blobs(
             for k in range(m):
                 e, a = members[k, 0], members[k, 1]
                 r = static[e, a]
-                if r > max_range:
+                el = ((e + 0.5) * cell_deg - 90.0) * deg
+                if r > max_range and el < cone_el:
                     ok = False
                     break
-                el = ((e + 0.5) * cell_deg - 90.0) * deg
                 az = ((a + 0.5) * cell_deg - 180.0) * deg
                 p0 = r * np.cos(el) * np.cos(az)
                 p1 = r * np.cos(el) * np.sin(az)
@@ -413,6 +415,7 @@ class BackgroundModel:
                 float(self.cfg.cell_deg),
                 float(self.cfg.floating_max_range_m),
                 float(self.cfg.floating_max_size_m),
+                float(np.radians(self.cfg.floating_any_range_above_deg)),
             )
             self._floating_cells = int(floating.sum())
             static = np.where(floating, np.float32(np.inf), static)

@@ -195,3 +195,37 @@ def test_swaying_small_crown_on_a_thin_trunk_is_released_only_as_a_cap() -> None
     trunk_pts = np.all((pts > [5.8, -2.2, GROUND_Z + 0.3]) & (pts < [6.15, -1.85, 0.6]), axis=1)
     assert trunk_pts.sum() >= 5
     assert np.all(model.classify(pts)[trunk_pts] != FOREGROUND)
+
+
+def _cone_scan(rng: np.random.Generator, spheres: list[Sphere]) -> np.ndarray:
+    """A Mid-360 scan plus an Avia-like scan of the cone above 52 degrees (dense, narrow)."""
+    return np.concatenate(
+        [
+            scan(rng, spheres),
+            scan(rng, spheres, n_rays=60000, wall=False, el_range_deg=(52.0, 90.0)),
+        ]
+    )
+
+
+@pytest.mark.parametrize("seed", [51, 52])
+def test_drone_hovering_high_in_the_avia_cone_all_along_is_not_background(seed: int) -> None:
+    centre = np.array([14.0, 9.0, 40.0])  # 43 m away, 68 degrees up: one 2-degree cell wide
+    rng = np.random.default_rng(seed)
+
+    def drone(k: int) -> list[Sphere]:
+        return [((*(centre + 0.1 * np.array([np.sin(0.3 * k), np.cos(0.2 * k), 0.0])),), 0.4)]
+
+    frames = [drone(k) for k in range(60)]
+    model = BackgroundModel(BackgroundConfig())
+    for k, spheres in enumerate(frames):
+        model.observe(k * NS, _cone_scan(rng, spheres))
+    pts = _cone_scan(np.random.default_rng(seed + 100), drone(30))
+    on = points_near(pts, centre, 0.8)
+    assert on.sum() >= 3
+    assert np.mean(model.classify(pts)[on] == FOREGROUND) > 0.8
+    # the same blob below the cone, 43 m away, is too far to judge: it stays background
+    low = BackgroundModel(BackgroundConfig(floating_any_range_above_deg=90.0))
+    rng = np.random.default_rng(seed)
+    for k, spheres in enumerate(frames):
+        low.observe(k * NS, _cone_scan(rng, spheres))
+    assert np.all(low.classify(pts)[on] != FOREGROUND)
