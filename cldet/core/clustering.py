@@ -39,20 +39,33 @@ def _find(parent: NDArray[np.int64], i: int) -> int:
 
 
 @numba.njit(cache=True)
-def _neighbour_pairs(
-    points: NDArray[np.float64], eps: float
-) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-    """All pairs (i < j) within ``eps`` (inclusive) and their squared distances, on a grid."""
+def _sorted_grid(
+    points: NDArray[np.float64], h: float, pad: int
+) -> tuple[
+    NDArray[np.int64],
+    NDArray[np.int64],
+    NDArray[np.int64],
+    NDArray[np.int64],
+    NDArray[np.int64],
+    NDArray[np.int64],
+]:
+    """Points binned in cubic cells of edge ``h``, sorted by cell key.
+
+    Returns ``(lo, span, order, ukeys, starts, ccell)``: the grid origin and size per axis (with
+    ``pad`` empty cells on each side, so neighbour keys never wrap), the point order by key, the
+    occupied cells' keys, their point ranges ``order[starts[c]:starts[c + 1]]`` and their integer
+    coordinates.
+    """
     n = points.shape[0]
     cells = np.empty((n, 3), dtype=np.int64)
     for i in range(n):
         for d in range(3):
-            cells[i, d] = np.int64(np.floor(points[i, d] / eps))
+            cells[i, d] = np.int64(np.floor(points[i, d] / h))
     lo = np.empty(3, dtype=np.int64)
     span = np.empty(3, dtype=np.int64)
     for d in range(3):
-        lo[d] = cells[:, d].min() - 1
-        span[d] = cells[:, d].max() - lo[d] + 2
+        lo[d] = cells[:, d].min() - pad
+        span[d] = cells[:, d].max() - lo[d] + pad + 1
     keys = np.empty(n, dtype=np.int64)
     for i in range(n):
         keys[i] = ((cells[i, 0] - lo[0]) * span[1] + (cells[i, 1] - lo[1])) * span[2] + (
@@ -60,22 +73,35 @@ def _neighbour_pairs(
         )
     order = np.argsort(keys)
     skeys = keys[order]
-    # occupied cells: ukeys[c], points order[starts[c]:starts[c+1]]
     n_cells = 1
     for s in range(1, n):
         if skeys[s] != skeys[s - 1]:
             n_cells += 1
     ukeys = np.empty(n_cells, dtype=np.int64)
     starts = np.empty(n_cells + 1, dtype=np.int64)
+    ccell = np.empty((n_cells, 3), dtype=np.int64)
     c = 0
     ukeys[0] = skeys[0]
     starts[0] = 0
+    ccell[0] = cells[order[0]]
     for s in range(1, n):
         if skeys[s] != skeys[s - 1]:
             c += 1
             ukeys[c] = skeys[s]
             starts[c] = s
+            ccell[c] = cells[order[s]]
     starts[n_cells] = n
+    return lo, span, order, ukeys, starts, ccell
+
+
+@numba.njit(cache=True)
+def _neighbour_pairs(
+    points: NDArray[np.float64], eps: float
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """All pairs (i < j) within ``eps`` (inclusive) and their squared distances, on a grid."""
+    n = points.shape[0]
+    _, span, order, ukeys, starts, _ = _sorted_grid(points, eps, 1)
+    n_cells = len(ukeys)
     eps2 = eps * eps
     cap = 4 * n + 16
     pairs = np.empty((cap, 2), dtype=np.int64)
@@ -213,40 +239,8 @@ def _grid_components(points: NDArray[np.float64], eps: float) -> NDArray[np.int6
     """
     n = points.shape[0]
     h = eps / np.sqrt(3.0) * (1.0 - 1e-12)
-    cells = np.empty((n, 3), dtype=np.int64)
-    for i in range(n):
-        for d in range(3):
-            cells[i, d] = np.int64(np.floor(points[i, d] / h))
-    lo = np.empty(3, dtype=np.int64)
-    span = np.empty(3, dtype=np.int64)
-    for d in range(3):
-        lo[d] = cells[:, d].min() - 3
-        span[d] = cells[:, d].max() - lo[d] + 4
-    keys = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        keys[i] = ((cells[i, 0] - lo[0]) * span[1] + (cells[i, 1] - lo[1])) * span[2] + (
-            cells[i, 2] - lo[2]
-        )
-    order = np.argsort(keys)
-    skeys = keys[order]
-    n_cells = 1
-    for s in range(1, n):
-        if skeys[s] != skeys[s - 1]:
-            n_cells += 1
-    ukeys = np.empty(n_cells, dtype=np.int64)
-    starts = np.empty(n_cells + 1, dtype=np.int64)
-    ccell = np.empty((n_cells, 3), dtype=np.int64)
-    c = 0
-    ukeys[0] = skeys[0]
-    starts[0] = 0
-    ccell[0] = cells[order[0]]
-    for s in range(1, n):
-        if skeys[s] != skeys[s - 1]:
-            c += 1
-            ukeys[c] = skeys[s]
-            starts[c] = s
-            ccell[c] = cells[order[s]]
-    starts[n_cells] = n
+    lo, span, order, ukeys, starts, ccell = _sorted_grid(points, h, 3)
+    n_cells = len(ukeys)
     eps2 = eps * eps
     parent = np.arange(n_cells)
     for ci in range(n_cells):
