@@ -21,9 +21,12 @@ each detection weighted by per-detection evidence and the track's factors:
   (15 m/s); above ``cruise_speed`` (8 m/s: survey and filming flights are slower; a crossing
   bird is faster) the median speed lowers the factor linearly to 0.3 at ``max_speed``;
   factor 0.3 when 90 % of its detections lie within ``static_spread_m`` (0.5 m) of their median
-  (sparse returns from different parts of one object scatter its centroid): static
-  clutter (a lamp head, a leaf clump), or a drone hovering the whole time (kept when nothing
-  else is there, but a real mover wins);
+  (sparse returns from different parts of one object scatter its centroid), or when they
+  scatter less than 2 m but a least-squares constant-velocity fit moves them less than
+  ``static_spread_m`` over the track's span (a swaying or flickering clump far away, whose
+  sparse centroid jumps by half a metre frame to frame but goes nowhere): static clutter (a
+  lamp head, a leaf clump), or a drone hovering the whole time (kept when nothing else is
+  there, but a real mover wins);
 * motion consistency: a detection whose NIS exceeds 7.81 (the 95 % point of chi^2, 3 dof)
   weighs exp(-(NIS - 7.81) / 7.81): smooth motion keeps its weight, erratic speckle or a
   bird's jinks lose it;
@@ -52,6 +55,7 @@ __all__ = ["ScoredTrack", "score_tracks", "select_chain"]
 
 _LINK_COST = 2.0
 _NIS95 = 7.81  # 95 % point of chi^2 with 3 degrees of freedom
+_JITTER_M = 2.0  # a track scattered less than this that goes nowhere is static clutter
 
 
 @dataclass(frozen=True)
@@ -63,6 +67,16 @@ class ScoredTrack:
     positions: NDArray[np.float64]  # (H,3) cluster centroids, metres
     contribution: NDArray[np.float64]  # (H,) each detection's weight in the score
     score: float
+
+
+def _net_motion(t: NDArray[np.float64], pos: NDArray[np.float64]) -> float:
+    """How far a least-squares constant-velocity fit moves over the track's time span, metres."""
+    span = float(t[-1] - t[0])
+    if span <= 0:
+        return 0.0
+    tc = t - t.mean()
+    velocity = (tc @ (pos - pos.mean(axis=0))) / float(tc @ tc)
+    return float(np.linalg.norm(velocity)) * span
 
 
 def score_tracks(
@@ -110,7 +124,10 @@ def score_tracks(
             elif v > cfg.cruise_speed:
                 factor *= 1.0 - 0.7 * (v - cfg.cruise_speed) / (cfg.max_speed - cfg.cruise_speed)
         centre = np.median(pos, axis=0)
-        if np.percentile(np.linalg.norm(pos - centre, axis=1), 90) < cfg.static_spread_m:
+        spread = float(np.percentile(np.linalg.norm(pos - centre, axis=1), 90))
+        if spread < cfg.static_spread_m or (
+            spread < _JITTER_M and _net_motion(times_s[rec.frames], pos) < cfg.static_spread_m
+        ):
             factor *= 0.3
         factor *= 1.0 + 0.5 * float(np.mean(both))
         contribution = per_det * factor
