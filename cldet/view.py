@@ -46,7 +46,7 @@ _SOURCE_COLOURS = {
     Source.SMOOTHED: (80, 200, 255, 255),
     Source.FALLBACK: (255, 40, 40, 255),
 }
-_MID360_COLOUR = (150, 150, 150, 255)
+_MID360_COLOUR = (190, 190, 190, 255)
 _AVIA_COLOUR = (90, 140, 255, 255)
 _TRUTH_COLOUR = (255, 255, 255, 255)
 _TRACK_COLOUR = (255, 60, 200, 255)
@@ -189,15 +189,15 @@ class RerunView:
         )
         rec.log(
             "world/lidar/mid360",
-            rr.Points3D.from_fields(radii=0.02, colors=_MID360_COLOUR),
+            rr.Points3D.from_fields(radii=-1.2, colors=_MID360_COLOUR),
             static=True,
         )
         rec.log(
             "world/lidar/avia",
-            rr.Points3D.from_fields(radii=0.03, colors=_AVIA_COLOUR),
+            rr.Points3D.from_fields(radii=-2.0, colors=_AVIA_COLOUR),
             static=True,
         )
-        rec.log("world/foreground", rr.Points3D.from_fields(radii=0.06), static=True)
+        rec.log("world/foreground", rr.Points3D.from_fields(radii=-3.0), static=True)
         rec.log(
             "plots/error_m", rr.SeriesLines(names="3D error (m)", colors=_TRACK_COLOUR), static=True
         )
