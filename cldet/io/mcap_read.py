@@ -394,6 +394,10 @@ class LogReader:
                 continue
             if end_ns is not None and index.message_start_time >= end_ns:
                 break
+            if ids is not None and index.message_index_offsets and ids.isdisjoint(
+                index.message_index_offsets
+            ):
+                continue  # the chunk's message index says none of the wanted channels is in it
             self._file.seek(index.chunk_start_offset)
             record = self._file.read(index.chunk_length)
             for message in _chunk_messages(record, index.chunk_start_offset, ids):
