@@ -353,3 +353,34 @@ def test_rerun_reads_the_log_as_points3d(sample_log: tuple[Path, dict], tmp_path
     assert sorted(got) == [s for s, _ in written["clouds"]]
     for stamp, pts in written["clouds"]:
         assert np.array_equal(got[stamp], pts)
+
+
+def test_reading_one_topic_skips_chunks_without_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import cldet.io.mcap_read as mcap_read
+
+    rng = np.random.default_rng(3)
+    big = make_png(400, 300)  # each image fills a chunk of its own
+    log = tmp_path / "images.mcap"
+    with open(log, "wb") as f, LogWriter(f, chunk_size=len(big) // 2) as writer:
+        for k in range(6):
+            writer.write_image(tp.IMAGE, T0 + k * 100, big, tp.FRAME_CAMERA)
+            writer.write_cloud(tp.LIDAR_360, T0 + k * 100 + 50, rng.normal(size=(5, 3)), "mid360")
+    opened: list[int] = []
+    real = mcap_read._chunk_messages
+
+    def counting(record: bytes, offset: int, ids: set[int] | None) -> list:  # type: ignore[type-arg]
+        opened.append(offset)
+        return real(record, offset, ids)
+
+    monkeypatch.setattr(mcap_read, "_chunk_messages", counting)
+    clouds = list(mcap_read.iter_clouds(log, tp.LIDAR_360))
+    assert [c.stamp_ns for c in clouds] == [T0 + k * 100 + 50 for k in range(6)]
+    reading_clouds = len(opened)
+    opened.clear()
+    images = [m for _, _, m in mcap_read.open_log(log).iter_messages([tp.IMAGE])]
+    assert len(images) == 6
+    with mcap_read.open_log(log) as reader:
+        total = len(reader._summary.chunk_indexes)
+    assert reading_clouds < total  # the image-only chunks were not opened for the clouds
