@@ -149,7 +149,10 @@ def comparison_rows(report: DemoReport) -> list[tuple[str, ...]]:
         ("95th pct 3D error (m)", [fmt(r.evaluation.p95_error_m) for r in report.runs]),
         ("accuracy (constant class)", [fmt(r.evaluation.accuracy, 3) for r in report.runs]),
         ("rows scored", [str(r.evaluation.n_matched) for r in report.runs]),
-        ("predictions/s per core (with start-up)", [f"{r.predictions_per_s:.0f}" for r in report.runs]),
+        (
+            "predictions/s per core (with start-up)",
+            [f"{r.predictions_per_s:.0f}" for r in report.runs],
+        ),
     ]
     rows.extend((name, *values) for name, values in metrics)
     return rows

@@ -32,7 +32,7 @@ from cldet.core.estimator import FrameDetections, SequenceEstimate, make_estimat
 from cldet.core.frames import pair_frames
 from cldet.errors import CldetError, LogError
 from cldet.io import topics
-from cldet.io.mcap_read import iter_clouds, iter_positions, list_topics, read_metadata
+from cldet.io.mcap_read import iter_clouds, iter_positions, open_log
 from cldet.io.mcap_write import LogWriter
 from cldet.io.rewrite import Addition, rewrite_log
 from cldet.progress import NullProgress, Progress
@@ -112,7 +112,9 @@ def annotate_log(
     progress = progress or NullProgress()
     log = Path(log)
     output = Path(output) if output is not None else log
-    found = list_topics(log)
+    with open_log(log) as reader:
+        found = reader.list_topics()
+        source_meta = reader.metadata().get(topics.METADATA_SOURCE, {})
     if topics.LIDAR_360 not in found:
         raise LogError(
             f"{log}: no {topics.LIDAR_360} channel to annotate; topics in the log: "
@@ -120,7 +122,6 @@ def annotate_log(
         )
     n_frames = found[topics.LIDAR_360]
     has_avia = found.get(topics.LIVOX_AVIA, 0) > 0
-    source_meta = read_metadata(log).get(topics.METADATA_SOURCE, {})
     sequence = source_meta.get("sequence", log.stem)
 
     view: View = NullView()
@@ -156,8 +157,9 @@ def annotate_log(
         if truth:
             truth_ns = np.array([t.stamp_ns for t in truth], dtype=np.int64)
             truth_xyz = np.array([t.position for t in truth], dtype=np.float64)
-            view.log_truth(truth_ns, truth_xyz)
-            rms = _rms_error(result.estimates, truth_ns, truth_xyz)
+            errors = _truth_errors(result.estimates, truth_ns, truth_xyz)
+            view.log_truth(truth_ns, truth_xyz, errors)
+            rms = None if errors is None else float(np.sqrt(np.mean(errors**2)))
         metadata = {
             METADATA_ANNOTATE: {
                 "method": config.method,
@@ -193,17 +195,17 @@ def annotate_log(
     )
 
 
-def _rms_error(
+def _truth_errors(
     estimates: Sequence[Estimate], truth_ns: np.ndarray, truth_xyz: np.ndarray
-) -> float | None:
+) -> np.ndarray | None:
+    """(K,) 3D distance, metres, of the estimated trajectory to the truth at its K stamps."""
     from cldet.core.trajectory import evaluate_trajectory
 
     if not estimates:
         return None
     stamps = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
     positions = np.array([e.position for e in estimates], dtype=np.float64)
-    errors = np.linalg.norm(evaluate_trajectory(stamps, positions, truth_ns) - truth_xyz, axis=1)
-    return float(np.sqrt(np.mean(errors**2)))
+    return np.linalg.norm(evaluate_trajectory(stamps, positions, truth_ns) - truth_xyz, axis=1)
 
 
 def result_additions(
@@ -211,7 +213,8 @@ def result_additions(
 ) -> list[tuple[int, Addition]]:
     """The ``/cldet/*`` messages of one annotate run, as ``(log_time_ns, write)`` pairs.
 
-    - ``/cldet/estimate`` (cldet.Estimate) and ``/cldet/pose`` (foxglove.PoseInFrame) per estimate;
+    - ``/cldet/estimate`` (cldet.Estimate) and ``/cldet/estimate/pose`` (foxglove.PoseInFrame)
+      per estimate;
     - ``/cldet/trajectory`` (foxglove.PosesInFrame): the whole smoothed trajectory, once, at the
       first frame's stamp, so a viewer shows it for the whole playback;
     - ``/cldet/clusters`` (foxglove.SceneUpdate) per frame: a box and label per cluster, the

@@ -62,8 +62,13 @@ class View(Protocol):
     def log_result(self, result: SequenceEstimate, detections: Sequence[FrameDetections]) -> None:
         """The sequence's estimates, trajectory, chosen clusters and track events."""
 
-    def log_truth(self, stamps_ns: NDArray[np.int64], positions: NDArray[np.float64]) -> None:
-        """The ground truth and the error of the estimates against it."""
+    def log_truth(
+        self,
+        stamps_ns: NDArray[np.int64],
+        positions: NDArray[np.float64],
+        errors_m: NDArray[np.float64] | None,
+    ) -> None:
+        """The ground truth and the 3D error of the estimates at its stamps (None: no estimate)."""
 
     def close(self) -> Path | None:
         """Finish the recording; returns its path (None when nothing is written)."""
@@ -81,7 +86,12 @@ class NullView:
     def log_result(self, result: SequenceEstimate, detections: Sequence[FrameDetections]) -> None:
         """Do nothing."""
 
-    def log_truth(self, stamps_ns: NDArray[np.int64], positions: NDArray[np.float64]) -> None:
+    def log_truth(
+        self,
+        stamps_ns: NDArray[np.int64],
+        positions: NDArray[np.float64],
+        errors_m: NDArray[np.float64] | None,
+    ) -> None:
         """Do nothing."""
 
     def close(self) -> Path | None:
@@ -166,8 +176,6 @@ class RerunView:
         self._avia = _CloudBuffer()
         self._foreground = _CloudBuffer()
         self._boxes: list[tuple[int, NDArray[np.float64], NDArray[np.float64], list[str]]] = []
-        self._estimate_stamps = np.zeros(0, np.int64)  # set by log_result, used by log_truth
-        self._estimate_positions = np.zeros((0, 3), np.float64)
         self._closed = False
         self._log_static()
 
@@ -296,13 +304,14 @@ class RerunView:
                     level=["WARN" if e.kind == "lost" else "INFO" for e in result.events],
                 ),
             )
-        self._estimate_stamps = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
-        self._estimate_positions = np.array(
-            [e.position for e in estimates], dtype=np.float64
-        ).reshape(-1, 3)
 
-    def log_truth(self, stamps_ns: NDArray[np.int64], positions: NDArray[np.float64]) -> None:
-        """Send the ground truth and the 3D error of the estimates (call after log_result)."""
+    def log_truth(
+        self,
+        stamps_ns: NDArray[np.int64],
+        positions: NDArray[np.float64],
+        errors_m: NDArray[np.float64] | None,
+    ) -> None:
+        """Send the ground truth and the 3D error of the estimates at its stamps."""
         import rerun as rr
 
         if len(stamps_ns) == 0:
@@ -322,19 +331,12 @@ class RerunView:
             rr.LineStrips3D([positions], colors=[_TRUTH_COLOUR], radii=[0.02]),
             static=True,
         )
-        if len(self._estimate_stamps) == 0:
-            return
-        from cldet.core.trajectory import evaluate_trajectory
-
-        estimated = evaluate_trajectory(
-            self._estimate_stamps, self._estimate_positions, np.asarray(stamps_ns, np.int64)
-        )
-        errors = np.linalg.norm(estimated - positions, axis=1)
-        rec.send_columns(
-            "plots/error_m",
-            indexes=[_time_column(stamps_ns)],
-            columns=rr.Scalars.columns(scalars=errors),
-        )
+        if errors_m is not None:
+            rec.send_columns(
+                "plots/error_m",
+                indexes=[_time_column(stamps_ns)],
+                columns=rr.Scalars.columns(scalars=errors_m),
+            )
 
     def close(self) -> Path:
         """Flush everything, close the file and rename it into place."""

@@ -394,8 +394,10 @@ class LogReader:
                 continue
             if end_ns is not None and index.message_start_time >= end_ns:
                 break
-            if ids is not None and index.message_index_offsets and ids.isdisjoint(
-                index.message_index_offsets
+            if (
+                ids is not None
+                and index.message_index_offsets
+                and ids.isdisjoint(index.message_index_offsets)
             ):
                 continue  # the chunk's message index says none of the wanted channels is in it
             self._file.seek(index.chunk_start_offset)
