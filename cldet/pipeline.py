@@ -213,7 +213,7 @@ def result_additions(
 ) -> list[tuple[int, Addition]]:
     """The ``/cldet/*`` messages of one annotate run, as ``(log_time_ns, write)`` pairs.
 
-    - ``/cldet/estimate`` (cldet.Estimate) and ``/cldet/estimate/pose`` (foxglove.PoseInFrame)
+    - ``/cldet/estimate`` (cldet.Estimate) and ``/cldet/pose`` (foxglove.PoseInFrame)
       per estimate;
     - ``/cldet/trajectory`` (foxglove.PosesInFrame): the whole smoothed trajectory, once, at the
       first frame's stamp, so a viewer shows it for the whole playback;
@@ -240,7 +240,7 @@ def result_additions(
 def _estimate_writer(est: Estimate) -> Addition:
     def write(writer: LogWriter) -> None:
         writer.write_estimate(topics.ESTIMATE, est.stamp_ns, est)
-        writer.write_pose(topics.ESTIMATE_POSE, est.stamp_ns, est.position, topics.FRAME_MID360)
+        writer.write_pose(topics.POSE, est.stamp_ns, est.position, topics.FRAME_MID360)
 
     return write
 

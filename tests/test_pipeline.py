@@ -51,10 +51,25 @@ def test_annotate_adds_result_channels_and_keeps_sources_byte_identical(
     counts = list_topics(out)
     n_frames = counts[topics.LIDAR_360]
     assert report.frames == n_frames
-    for topic in (topics.ESTIMATE, topics.ESTIMATE_POSE, topics.FOREGROUND):
+    for topic in (topics.ESTIMATE, topics.POSE, topics.FOREGROUND):
         assert counts[topic] == n_frames, topic
     assert counts[topics.TRAJECTORY] == 1
     assert counts[topics.CLUSTERS] == 2 * n_frames  # the other clusters and the chosen one
+    with open(out, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    schema_of = {
+        c.topic: summary.schemas[c.schema_id].name
+        for c in summary.channels.values()
+        if c.topic.startswith("/cldet/")
+    }
+    assert schema_of == {
+        topics.ESTIMATE: "cldet.Estimate",
+        topics.POSE: "foxglove.PoseInFrame",
+        topics.TRAJECTORY: "foxglove.PosesInFrame",
+        topics.CLUSTERS: "foxglove.SceneUpdate",
+        topics.FOREGROUND: "foxglove.PointCloud",
+    }
     estimates = [e for e, _ in iter_estimates(out)]
     assert [e.stamp_ns for e in estimates] == [m[1] for m in before if m[0] == topics.LIDAR_360]
     meta = read_metadata(out)[topics.METADATA_CONFIG]

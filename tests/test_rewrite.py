@@ -49,7 +49,7 @@ def _pose_additions(stamps: list[int], offset: float) -> list:
         (
             s,
             lambda w, s=s: w.write_pose(
-                topics.ESTIMATE_POSE, s, [offset, 0.0, 0.0], topics.FRAME_MID360
+                topics.POSE, s, [offset, 0.0, 0.0], topics.FRAME_MID360
             ),
         )
         for s in stamps
@@ -67,7 +67,7 @@ def test_rewrite_copies_sources_byte_for_byte_and_interleaves_results(
     )
     after = _messages(out)
     assert [m for m in after if not m[0].startswith("/cldet/")] == before
-    results = [m for m in after if m[0] == topics.ESTIMATE_POSE]
+    results = [m for m in after if m[0] == topics.POSE]
     assert [m[1] for m in results] == stamps  # sorted by time although given reversed
     assert all(m[1] == m[2] for m in results)
     assert [m[1] for m in after] == sorted(m[1] for m in after)
@@ -90,7 +90,7 @@ def test_rewriting_twice_in_place_replaces_earlier_results(log: Path) -> None:
         replace_metadata=["cldet.config"],
     )
     assert stats.dropped_messages == len(stamps)
-    results = [m for m in _messages(log) if m[0] == topics.ESTIMATE_POSE]
+    results = [m for m in _messages(log) if m[0] == topics.POSE]
     assert len(results) == 5
     assert _metadata(log)["cldet.config"] == {"run": "2"}
     assert not list(log.parent.glob(".*tmp*"))

@@ -61,7 +61,7 @@ def annotate(
 
     Each log is rewritten in place (through a temporary file renamed over it when complete; every
     source message stays byte-identical; an earlier annotation is replaced). New channels:
-    /cldet/estimate, /cldet/estimate/pose, /cldet/trajectory, /cldet/clusters, /cldet/foreground, and a
+    /cldet/estimate, /cldet/pose, /cldet/trajectory, /cldet/clusters, /cldet/foreground, and a
     `cldet.config` metadata record with the method and effective configuration.
 
     A Rerun recording (clouds, foreground, clusters, estimated and true trajectories, error over

@@ -32,7 +32,7 @@ CLOUD_TOPICS: Final = (LIDAR_360, LIVOX_AVIA, RADAR)
 
 # --- result channels (written by `cldet annotate`) -----------------------------------------
 ESTIMATE: Final = "/cldet/estimate"  # cldet.Estimate, one per Mid-360 frame
-ESTIMATE_POSE: Final = "/cldet/estimate/pose"  # foxglove.PoseInFrame, drawn by both viewers
+POSE: Final = "/cldet/pose"  # foxglove.PoseInFrame, drawn by both viewers
 TRAJECTORY: Final = "/cldet/trajectory"  # foxglove.PosesInFrame, the track so far
 FOREGROUND: Final = "/cldet/foreground"  # foxglove.PointCloud x,y,z,cluster_id
 CLUSTERS: Final = "/cldet/clusters"  # foxglove.SceneUpdate, cluster boxes + labels
