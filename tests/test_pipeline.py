@@ -155,6 +155,27 @@ def test_review_recording_has_the_entities_and_verifies(source_log: Path, tmp_pa
     assert done.returncode == 0, done.stderr
 
 
+def test_rerun_opens_the_annotated_log_with_its_result_channels(
+    source_log: Path, tmp_path: Path
+) -> None:
+    """The appended layout (sources, then results, one summary) is read by Rerun's MCAP loader."""
+    import rerun as rr
+
+    rerun = shutil.which("rerun")
+    if rerun is None:
+        pytest.skip("the rerun CLI is not on PATH (pip install rerun-sdk)")
+    log = tmp_path / "log.mcap"
+    shutil.copy(source_log, log)
+    annotate_log(log, write_rrd=False)
+    annotate_log(log, write_rrd=False)  # the second run cuts the first one's results off
+    rrd = tmp_path / "log.rrd"
+    for command in (["mcap", "convert", str(log), "-o", str(rrd)], ["rrd", "verify", str(rrd)]):
+        done = subprocess.run([rerun, *command], capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+    paths = {str(p) for p in rr.chunk.RrdReader(rrd).store().schema().entity_paths()}
+    assert {topics.LIDAR_360, topics.FOREGROUND, topics.CLUSTERS} <= paths, paths
+
+
 def test_cli_annotate_with_a_config_file(source_log: Path, tmp_path: Path) -> None:
     log = tmp_path / "log.mcap"
     shutil.copy(source_log, log)

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap.reader import make_reader
+from mcap.summary import Summary
 
 from cldet.errors import LogError
 from cldet.io import topics
@@ -48,15 +49,13 @@ def _pose_additions(stamps: list[int], offset: float) -> list:
     return [
         (
             s,
-            lambda w, s=s: w.write_pose(
-                topics.POSE, s, [offset, 0.0, 0.0], topics.FRAME_MID360
-            ),
+            lambda w, s=s: w.write_pose(topics.POSE, s, [offset, 0.0, 0.0], topics.FRAME_MID360),
         )
         for s in stamps
     ]
 
 
-def test_rewrite_copies_sources_byte_for_byte_and_interleaves_results(
+def test_rewrite_copies_sources_byte_for_byte_and_adds_results_in_time_order(
     log: Path, tmp_path: Path
 ) -> None:
     before = _messages(log)
@@ -94,6 +93,85 @@ def test_rewriting_twice_in_place_replaces_earlier_results(log: Path) -> None:
     assert len(results) == 5
     assert _metadata(log)["cldet.config"] == {"run": "2"}
     assert not list(log.parent.glob(".*tmp*"))
+
+
+def _summary(path: Path) -> Summary:
+    with open(path, "rb") as f:
+        summary = make_reader(f, validate_crcs=True).get_summary()
+    assert summary is not None
+    return summary
+
+
+def _data_end(path: Path) -> int:
+    """Offset of the log's DataEnd record (where its data section ends)."""
+    with open(path, "rb") as f:
+        f.seek(-37, 2)  # footer record (29 bytes) and magic (8)
+        footer = f.read(29)
+    assert footer[0] == 0x02
+    return int.from_bytes(footer[9:17], "little") - 13  # DataEnd: opcode, length, crc
+
+
+def test_results_are_appended_after_a_verbatim_copy_of_the_data_section(log: Path) -> None:
+    """Sources are not decoded or recompressed: the output starts with the source's bytes."""
+    source = log.read_bytes()
+    data_end = _data_end(log)
+    stamps = [m[1] for m in _messages(log) if m[0] == topics.LIDAR_360]
+    out = log.with_name("out.mcap")
+    rewrite_log(log, out, _pose_additions(stamps, 1.0), metadata={"cldet.config": {"run": "1"}})
+    assert out.read_bytes()[:data_end] == source[:data_end]
+    first = _summary(out)
+    assert first.statistics is not None
+    counts = {
+        first.channels[c].topic: n for c, n in first.statistics.channel_message_counts.items()
+    }
+    assert counts == {topics.LIDAR_360: 20, topics.GROUND_TRUTH: 20, topics.POSE: 20}
+    assert first.statistics.message_count == 60
+    assert first.statistics.chunk_count == len(first.chunk_indexes)
+
+    # again, in place: the earlier results are cut off, the sources still copied verbatim
+    rewrite_log(
+        out,
+        out,
+        _pose_additions(stamps[:3], 2.0),
+        metadata={"cldet.config": {"run": "2"}},
+        replace_metadata=["cldet.config"],
+    )
+    assert out.read_bytes()[:data_end] == source[:data_end]
+    second = _summary(out)
+    assert second.statistics is not None
+    assert second.statistics.message_count == 43
+    assert [m for m in _messages(out) if m[0] == topics.POSE][-1][1] == stamps[2]
+    assert _metadata(out)["cldet.config"] == {"run": "2"}
+    assert len(second.metadata_indexes) == 2  # the source's and the new cldet.config
+
+
+def test_a_log_with_results_among_the_sources_is_rewritten_then_appended_to(
+    tmp_path: Path,
+) -> None:
+    """Results interleaved with the sources (another tool): a full copy first, then appends."""
+    path = tmp_path / "mixed.mcap"
+    with open(path, "wb") as f, LogWriter(f) as writer:
+        for i in range(10):
+            stamp = 1_706_255_621_600_227_000 + i * 100_000_000
+            writer.write_cloud(topics.LIDAR_360, stamp, np.ones((5, 3)), topics.FRAME_MID360)
+            writer.write_pose(topics.POSE, stamp, [9.0, 9.0, 9.0], topics.FRAME_MID360)
+    sources = [m for m in _messages(path) if m[0] == topics.LIDAR_360]
+    stamps = [m[1] for m in sources]
+    stats = rewrite_log(path, path, _pose_additions(stamps, 1.0))
+    assert stats.dropped_messages == 10 and stats.copied_messages == 10
+    after = _messages(path)
+    assert [m for m in after if m[0] == topics.LIDAR_360] == sources
+    assert [m[1] for m in after if m[0] == topics.POSE] == stamps
+    assert not list(tmp_path.glob(".*"))  # neither the temporary file nor the clean copy
+    summary = _summary(path)
+    pose = next(c for c, ch in summary.channels.items() if ch.topic == topics.POSE)
+    cut = min(
+        c.chunk_start_offset for c in summary.chunk_indexes if pose in c.message_index_offsets
+    )
+    clean = path.read_bytes()[:cut]  # the clean copy of the sources
+    rewrite_log(path, path, _pose_additions(stamps, 2.0))
+    assert path.read_bytes()[:cut] == clean
+    assert [m[1] for m in _messages(path) if m[0] == topics.POSE] == stamps
 
 
 def test_failure_midway_leaves_the_input_intact_and_no_temporary_file(log: Path) -> None:

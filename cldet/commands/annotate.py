@@ -59,8 +59,9 @@ def annotate(
 ) -> None:
     """Estimate the drone's 3D position at every Mid-360 frame and add the results to each log.
 
-    Each log is rewritten in place (through a temporary file renamed over it when complete; every
-    source message stays byte-identical; an earlier annotation is replaced). New channels:
+    Each log is rewritten in place: its data is copied byte for byte into a temporary file (no
+    decompression), the results are appended, and the file is renamed over the log when complete;
+    an earlier annotation is replaced. New channels:
     /cldet/estimate, /cldet/pose, /cldet/trajectory, /cldet/clusters, /cldet/foreground, and a
     `cldet.config` metadata record with the method and effective configuration.
 

@@ -11,10 +11,11 @@ listing the topics that exist when one is missing).
 
 from __future__ import annotations
 
+import heapq
 import os
 import struct
 import zlib
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
@@ -32,6 +33,7 @@ from numpy.typing import NDArray
 
 from cldet.errors import LogError
 from cldet.io import topics
+from cldet.io.mcap_append import AppendPlan, copy_prefix, plan_append
 from cldet.io.schemas import ClassLabel
 from cldet.io.schemas import Estimate as EstimateMessage
 from cldet.types import ClassSample, Cloud, Estimate, PositionSample, Source
@@ -152,6 +154,7 @@ _DECOMPRESS: dict[str, Callable[[bytes, int], bytes]] = {
     "lz4": lambda data, size: lz4.frame.decompress(data),
 }
 _MESSAGE_OPCODE = 0x05
+_MAX_RUNS = 4  # more interleaved chunk runs than this: the generic reader
 _CHUNK_OPCODE = 0x06
 
 
@@ -235,8 +238,6 @@ class LogReader:
             )
         self._reader = reader
         self._summary: Summary = summary
-        self._in_order: bool | None = None  # see _chunks_in_order
-        self._sorted_chunks: list[ChunkIndex] = []
 
     def __enter__(self) -> LogReader:
         return self
@@ -327,6 +328,28 @@ class LogReader:
                 f"expected {' or '.join(wanted)}"
             )
 
+    # --- continuing the log (cldet.io.mcap_append) ---------------------------------------------
+    def plan_append(
+        self, replace_prefix: str, replace_metadata: Sequence[str]
+    ) -> AppendPlan | None:
+        """Where this log can be cut to append records (None: it must be rewritten in full)."""
+        try:
+            return plan_append(
+                self._file,
+                self._summary,
+                replace_prefix=replace_prefix,
+                replace_metadata=replace_metadata,
+            )
+        except OSError as err:
+            raise LogError(f"cannot read {self.path}: {err}") from err
+
+    def copy_prefix(self, target: IO[bytes], length: int) -> None:
+        """Copy the log's first ``length`` bytes into ``target`` (opened for writing, empty)."""
+        try:
+            copy_prefix(self._file, target, length)
+        except OSError as err:
+            raise LogError(f"cannot copy {self.path}: {err}") from err
+
     # --- messages ----------------------------------------------------------------------------
     def iter_messages(
         self,
@@ -344,11 +367,17 @@ class LogReader:
             topic_names = [topic_names]
         wanted = None if topic_names is None else list(topic_names)
         try:
-            if self._chunks_in_order():
-                yield from self._iter_chunks(wanted, start_ns, end_ns)
-            else:
+            runs = self._chunk_runs(wanted)
+            if runs is None:
                 yield from self._reader.iter_messages(
                     topics=wanted, starting_at=start_ns, ending_before=end_ns
+                )
+            elif len(runs) == 1:
+                yield from self._iter_chunks(runs[0], wanted, start_ns, end_ns)
+            else:  # e.g. the sources, then the results appended by `cldet annotate`
+                yield from heapq.merge(
+                    *(self._iter_chunks(run, wanted, start_ns, end_ns) for run in runs),
+                    key=lambda item: item[2].log_time,
                 )
         except LogError:
             raise
@@ -356,50 +385,68 @@ class LogReader:
             what = f"topics {', '.join(wanted)}" if wanted else "messages"
             raise LogError(f"cannot read {what} from {self.path} (corrupt?): {err}") from err
 
-    def _chunks_in_order(self) -> bool:
-        """True when every message is in a chunk and the chunks do not overlap in time.
+    def _wanted_ids(self, wanted: list[str] | None) -> set[int] | None:
+        if wanted is None:
+            return None
+        names = set(wanted)
+        return {cid for cid, ch in self._summary.channels.items() if ch.topic in names}
 
-        Then the chunks can be read one after another with :func:`_chunk_messages`, far faster
-        than the generic reader (which parses every record field by field); logs written by
-        cldet always qualify. Anything else goes through the generic reader.
+    def _chunk_runs(self, wanted: list[str] | None) -> list[list[ChunkIndex]] | None:
+        """The chunks holding ``wanted``, as a few runs of chunks that do not overlap in time.
+
+        Each run can be read chunk after chunk with :func:`_chunk_messages`, far faster than the
+        generic reader (which parses every record field by field); the runs are merged by time.
+        A log written by cldet has one run per writer (the sources, the appended results).
+        None when some message is not in a chunk, a compression is unknown, or the chunks
+        interleave too much: then the generic reader is used.
         """
-        if self._in_order is None:
-            chunks = sorted(
-                self._summary.chunk_indexes,
-                key=lambda c: (c.message_start_time, c.message_end_time),
+        stats = self._summary.statistics
+        chunks = self._summary.chunk_indexes
+        if not chunks or stats is None or stats.chunk_count != len(chunks):
+            return None
+        if any(c.compression not in _DECOMPRESS for c in chunks):
+            return None
+        ids = self._wanted_ids(wanted)
+        relevant = sorted(
+            (
+                c
+                for c in chunks
+                if ids is None
+                or not c.message_index_offsets
+                or not ids.isdisjoint(c.message_index_offsets)
+            ),
+            key=lambda c: (c.message_start_time, c.message_end_time),
+        )
+        runs: list[list[ChunkIndex]] = []
+        for chunk in relevant:
+            run = next(
+                (r for r in runs if r[-1].message_end_time <= chunk.message_start_time), None
             )
-            stats = self._summary.statistics
-            ordered = bool(chunks) and stats is not None and stats.chunk_count == len(chunks)
-            for before, after in zip(chunks, chunks[1:], strict=False):
-                ordered = ordered and after.message_start_time >= before.message_end_time
-            ordered = ordered and all(c.compression in _DECOMPRESS for c in chunks)
-            self._in_order = ordered
-            self._sorted_chunks = chunks
-        return self._in_order
+            if run is None:
+                if len(runs) == _MAX_RUNS:
+                    return None
+                runs.append([chunk])
+            else:
+                run.append(chunk)
+        return runs or [[]]
 
     def _iter_chunks(
-        self, wanted: list[str] | None, start_ns: int | None, end_ns: int | None
+        self,
+        run: list[ChunkIndex],
+        wanted: list[str] | None,
+        start_ns: int | None,
+        end_ns: int | None,
     ) -> Iterator[tuple[Schema | None, Channel, Message]]:
         channels = self._summary.channels
         schemas = self._summary.schemas
-        ids = (
-            None
-            if wanted is None
-            else {cid for cid, ch in channels.items() if ch.topic in set(wanted)}
-        )
+        ids = self._wanted_ids(wanted)
         if ids is not None and not ids:
             return
-        for index in self._sorted_chunks:
+        for index in run:
             if start_ns is not None and index.message_end_time < start_ns:
                 continue
             if end_ns is not None and index.message_start_time >= end_ns:
                 break
-            if (
-                ids is not None
-                and index.message_index_offsets
-                and ids.isdisjoint(index.message_index_offsets)
-            ):
-                continue  # the chunk's message index says none of the wanted channels is in it
             self._file.seek(index.chunk_start_offset)
             record = self._file.read(index.chunk_length)
             for message in _chunk_messages(record, index.chunk_start_offset, ids):

@@ -44,6 +44,7 @@ from numpy.typing import ArrayLike
 from cldet import __version__
 from cldet.errors import LogError, OutputExistsError
 from cldet.io import topics
+from cldet.io.mcap_append import AppendPlan, AppendWriter
 from cldet.io.schemas import ClassLabel, file_descriptor_set
 from cldet.io.schemas import Estimate as EstimateMessage
 from cldet.types import Cluster, Estimate
@@ -141,6 +142,9 @@ class LogWriter:
         chunk_size: uncompressed bytes gathered per chunk; a chunk is what a reader must
             decompress to reach any message in it, so keep it modest.
         profile: the MCAP header's profile string (empty for protobuf logs).
+        continues: continue an existing log instead of starting one: ``stream`` already holds
+            the log's first ``continues.cut`` bytes (see :mod:`cldet.io.mcap_append`); new
+            records follow them, then a summary covering the old records and the new.
 
     Every ``write_*`` method takes ``stamp_ns``, integer nanoseconds since the Unix epoch, used
     exactly as log time, publish time and the message's ``timestamp``.
@@ -153,6 +157,7 @@ class LogWriter:
         compression: Compression | str = Compression.zstd,
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         profile: str = "",
+        continues: AppendPlan | None = None,
     ) -> None:
         try:
             self.compression = Compression(compression)
@@ -166,11 +171,15 @@ class LogWriter:
         if isinstance(stream, io.RawIOBase):  # buffer raw streams ourselves, flushed in finish()
             self._buffer = io.BufferedWriter(stream)
             self._stream = self._buffer
-        self._mcap = McapWriter(
-            self._stream,
-            chunk_size=chunk_size,
-            compression=_MCAP_COMPRESSION[self.compression],
-        )
+        self._mcap: McapWriter | AppendWriter
+        if continues is None:
+            self._mcap = McapWriter(
+                self._stream,
+                chunk_size=chunk_size,
+                compression=_MCAP_COMPRESSION[self.compression],
+            )
+        else:
+            self._mcap = AppendWriter(self._stream, continues, chunk_size=chunk_size)
         self._mcap.start(profile=profile, library=f"cldet/{__version__}")
         self._schemas: dict[str, int] = {}  # schema name -> id
         self._channels: dict[str, tuple[int, str]] = {}  # topic -> (channel id, schema name)

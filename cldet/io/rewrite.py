@@ -1,20 +1,29 @@
-"""Rewrite an MCAP log with extra channels: every source record is copied byte for byte.
+"""Add channels to an MCAP log: every source record is kept byte for byte.
 
-MCAP has no in-place append, so results are added by streaming the source into a temporary file in
-the target's folder (source schemas, channels, messages, metadata and attachments copied unchanged,
-the new messages interleaved by log time) and renaming it over the target when complete. Channels
-whose topic starts with a replaced prefix (``/cldet/``) and metadata records with a replaced name
-are dropped, so annotating twice replaces the earlier results instead of adding duplicates.
+MCAP has no in-place append, so results go into a temporary file in the target's folder, renamed
+over the target when complete. The fast path (:mod:`cldet.io.mcap_append`) copies the source's
+data section verbatim (no decompression, no recompression: image chunks cost a file copy) and
+appends the new channels' chunks, metadata and a new summary. Channels whose topic starts with a
+replaced prefix (``/cldet/``) and metadata records with a replaced name, which an earlier run
+appended at the end, are cut off first, so annotating twice replaces the earlier results instead
+of adding duplicates.
+
+A log the fast path cannot continue (no chunk index, or results interleaved with the sources, as
+other tools may write them) is first copied message by message without the replaced channels,
+then continued: the next run on it takes the fast path.
 """
 
 from __future__ import annotations
 
-import heapq
-from collections.abc import Callable, Iterable, Iterator, Sequence
+import contextlib
+import os
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import IO
 
+from cldet.errors import LogError
+from cldet.io.mcap_append import AppendPlan
 from cldet.io.mcap_read import LogReader, open_log
 from cldet.io.mcap_write import Compression, LogWriter, atomic_output
 
@@ -48,7 +57,8 @@ def rewrite_log(
             renamed over it (an existing ``target`` is replaced).
         additions: ``(log_time_ns, write)`` pairs in any order; each ``write`` adds one message
             through the :class:`LogWriter` (whose topics must start with ``replace_prefix``, so
-            that a later rewrite replaces them). They are interleaved with the source by time.
+            that a later rewrite replaces them). They are written in time order, after the
+            source's records.
         metadata: metadata records to add (name -> key/value strings).
         replace_prefix: source channels with this topic prefix are dropped.
         replace_metadata: source metadata records with these names are dropped.
@@ -57,35 +67,62 @@ def rewrite_log(
         LogError: the source cannot be read; the message names the file.
     """
     added = sorted(additions, key=lambda a: a[0])
-    copied = dropped = 0
-    with open_log(source) as reader, atomic_output(target, overwrite=True) as out:
-        compression = {"lz4": Compression.lz4, "": Compression.none}.get(
-            reader.chunk_compression(), Compression.zstd
-        )
-        with LogWriter(out, compression=compression, profile=reader.header().profile) as writer:
-            merged = heapq.merge(_source(reader), added, key=lambda item: item[0])
-            for _, payload in merged:
-                if callable(payload):
-                    payload(writer)
-                    continue
-                schema, channel, message = payload
-                if channel.topic.startswith(replace_prefix):
-                    dropped += 1
-                    continue
-                writer.write_raw(
-                    schema, channel, message.log_time, message.publish_time, message.data
-                )
-                copied += 1
-            for name, values in reader.metadata_records():
-                if name not in replace_metadata:
-                    writer.write_metadata(name, values)
-            for name, values in (metadata or {}).items():
+    with open_log(source) as reader:
+        plan = reader.plan_append(replace_prefix, replace_metadata)
+        if plan is not None:
+            return _append(reader, plan, target, added, metadata or {})
+    clean = target.with_name(f".{target.name}.clean-{os.getpid()}")
+    try:
+        with open_log(source) as reader, atomic_output(clean, overwrite=True) as out:
+            copied, dropped = _copy_without(reader, out, replace_prefix, replace_metadata)
+        with open_log(clean) as reader:
+            plan = reader.plan_append(replace_prefix, replace_metadata)
+            if plan is None:  # cannot happen for a log LogWriter wrote; never silently
+                raise LogError(f"{clean}: a clean copy of {source} cannot be continued")
+            stats = _append(reader, plan, target, added, metadata or {})
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            clean.unlink()
+    return RewriteStats(copied, dropped, stats.added_messages)
+
+
+def _append(
+    reader: LogReader,
+    plan: AppendPlan,
+    target: Path,
+    added: list[tuple[int, Addition]],
+    metadata: dict[str, dict[str, str]],
+) -> RewriteStats:
+    """Copy the log up to ``plan.cut`` into ``target`` (atomically) and append the additions."""
+    with atomic_output(target, overwrite=True) as out:
+        reader.copy_prefix(out, plan.cut)
+        with LogWriter(out, continues=plan) as writer:
+            for _, write in added:
+                write(writer)
+            for name, values in metadata.items():
                 writer.write_metadata(name, values)
-            for attachment in reader.attachments():
-                writer.write_attachment(attachment)
-    return RewriteStats(copied, dropped, len(added))
+    copied = sum(plan.channel_message_counts.values())
+    return RewriteStats(copied, plan.dropped_messages, len(added))
 
 
-def _source(reader: LogReader) -> Iterator[tuple[int, Any]]:
-    for schema, channel, message in reader.iter_messages():
-        yield message.log_time, (schema, channel, message)
+def _copy_without(
+    reader: LogReader, out: IO[bytes], replace_prefix: str, replace_metadata: Sequence[str]
+) -> tuple[int, int]:
+    """Copy every message, metadata record and attachment except the replaced ones."""
+    copied = dropped = 0
+    compression = {"lz4": Compression.lz4, "": Compression.none}.get(
+        reader.chunk_compression(), Compression.zstd
+    )
+    with LogWriter(out, compression=compression, profile=reader.header().profile) as writer:
+        for schema, channel, message in reader.iter_messages():
+            if channel.topic.startswith(replace_prefix):
+                dropped += 1
+                continue
+            writer.write_raw(schema, channel, message.log_time, message.publish_time, message.data)
+            copied += 1
+        for name, values in reader.metadata_records():
+            if name not in replace_metadata:
+                writer.write_metadata(name, values)
+        for attachment in reader.attachments():
+            writer.write_attachment(attachment)
+    return copied, dropped
