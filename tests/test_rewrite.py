@@ -145,6 +145,20 @@ def test_results_are_appended_after_a_verbatim_copy_of_the_data_section(log: Pat
     assert len(second.metadata_indexes) == 2  # the source's and the new cldet.config
 
 
+@pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
+def test_appended_chunks_use_the_source_compression(compression: str, tmp_path: Path) -> None:
+    path = tmp_path / "log.mcap"
+    with open(path, "wb") as f, LogWriter(f, compression=compression) as writer:
+        for i in range(5):
+            writer.write_cloud(topics.LIDAR_360, 1_000 + i, np.ones((3, 3)), topics.FRAME_MID360)
+    rewrite_log(path, path, _pose_additions([1_000, 1_004], 1.0))
+    rewrite_log(path, path, [])  # no additions: the earlier results are only cut off
+    summary = _summary(path)
+    expected = "" if compression == "none" else compression
+    assert {c.compression for c in summary.chunk_indexes} == {expected}
+    assert [m[0] for m in _messages(path)] == [topics.LIDAR_360] * 5
+
+
 def test_a_log_with_results_among_the_sources_is_rewritten_then_appended_to(
     tmp_path: Path,
 ) -> None:
