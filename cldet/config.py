@@ -76,6 +76,15 @@ class BackgroundConfig(BaseModel):
         le=90,
         description="above this elevation (the Avia cone) floating blobs count at any range",
     )
+    arrival_after_s: float = Field(
+        default=0.8,
+        ge=0,
+        description="static blobs first reached this long after the start arrived and stayed"
+        " (a drone that flew in and hovers): not background (0: off)",
+    )
+    arrival_min_cells: int = Field(
+        default=3, ge=1, description="... when they cover at least this many direction cells"
+    )
     release_caps: bool = Field(
         default=True,
         description="small static caps on a narrower column (a hover on a pole top) are not background",

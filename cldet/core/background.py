@@ -31,6 +31,19 @@ of* that environment along a ray. The model is a static range image (pass 1, str
    are cleared too. Nothing static tells the two apart, so both become candidates for the
    tracker, where a static candidate weighs 0.3 of a moving one: a lamp head cannot outscore a
    drone that is seen moving, and a drone hovering all along is no longer erased.
+   The environment is there from the start; a drone that flies in and then hovers (for the
+   ``min_bin_fraction`` of the sequence) is not. For every cell and bin the model also keeps
+   when the surface at the bin's nearest range was first hit (a hit nearer by more than
+   max(1 m, 10 %) is a new surface in front and restarts it); a cell's *onset* is that time in
+   the first bin whose nearest range is its static range (no onset when something passed in
+   front first). A blob of at least ``arrival_min_cells`` static cells (8-connected, near as
+   above), every one first reached ``arrival_after_s`` (0.8 s: eight scans) or more after the
+   start, at most ``floating_max_size_m`` across, arrived and stayed: it is cleared, with its
+   rim of neighbouring cells at the same range (reached a little earlier as the drone slowed
+   into place) when the whole stays that small. A cell of a surface is hit about once a scan,
+   so three cells all missed for eight scans do not happen by chance (single late cells do, on
+   the real data as well: hence the minimum). A parked car or a person who walks in and stays
+   is larger; a part of one that is released is a weak static candidate like a cap.
 5. Dilation: the static range is replaced by the minimum over the cell and its 8 neighbours
    (azimuth wraps), ``dilate_cells`` times. Foliage swaying by a few cm into the next cell,
    and beam divergence at edges, then stay background.
@@ -65,6 +78,10 @@ MARGIN = np.uint8(1)  # background only through dilation
 CORE = np.uint8(2)  # at or behind the static range of its own cell
 
 _Z_LO, _Z_HI, _Z_STEP = -30.0, 30.0, 0.05  # ground-height histogram, metres
+# two ranges in one cell belong to the same surface when within max(1 m, 10 %): the clearance
+# the floating-blob rule uses, far above range noise and foliage depth
+_SAME_SURFACE_M = 1.0
+_SAME_SURFACE_FRACTION = 0.1
 
 
 def direction_cells(
@@ -123,11 +140,26 @@ def _cells_kernel(
 
 @numba.njit(cache=True)
 def _observe_kernel(
-    cells: NDArray[np.int64], rng: NDArray[np.float32], nearest: NDArray[np.float32]
+    cells: NDArray[np.int64],
+    rng: NDArray[np.float32],
+    nearest: NDArray[np.float32],
+    onset: NDArray[np.int32],
+    t_ms: int,
 ) -> None:
+    """Per cell: the bin's nearest range, and when a surface at about that range was first hit.
+
+    A hit nearer than the bin's nearest so far by more than max(1 m, 10 %) is a new surface in
+    front (its time becomes the onset); a hit about as near only refines the range.
+    """
     for i in range(cells.shape[0]):
-        if rng[i] < nearest[cells[i]]:
-            nearest[cells[i]] = rng[i]
+        c = cells[i]
+        r = rng[i]
+        cur = nearest[c]
+        if r >= cur:
+            continue
+        if not np.isfinite(cur) or r < cur - max(_SAME_SURFACE_M, _SAME_SURFACE_FRACTION * cur):
+            onset[c] = t_ms
+        nearest[c] = r
 
 
 @numba.njit(cache=True)
@@ -360,6 +392,7 @@ class BackgroundModel:
         self._n_az = int(round(360.0 / cfg.cell_deg))
         self._n_el = int(np.ceil(180.0 / cfg.cell_deg))
         self._bins: list[NDArray[np.float32]] = []  # per bin: (n_el*n_az,) nearest range
+        self._onsets: list[NDArray[np.int32]] = []  # per bin: ms when that surface was first hit
         self._frames_per_bin: list[int] = []
         self._bin_ns = int(round(cfg.bin_s * 1e9))
         self._t0: int | None = None
@@ -369,6 +402,7 @@ class BackgroundModel:
         self._slack = np.zeros(0, dtype=np.float32)  # extra margin per cell (grazing surfaces)
         self._dilated: NDArray[np.float32] | None = None
         self._ground_z: float | None = None
+        self._arrival_cells = 0
         self.n_frames = 0
 
     # ---------------------------------------------------------------- pass 1
@@ -381,6 +415,7 @@ class BackgroundModel:
         b = (stamp_ns - self._t0) // self._bin_ns
         if b != self._bin:
             self._bins.append(np.full(self._n_el * self._n_az, np.inf, dtype=np.float32))
+            self._onsets.append(np.full(self._n_el * self._n_az, -1, dtype=np.int32))
             self._frames_per_bin.append(0)
             self._bin = int(b)
         self._frames_per_bin[-1] += 1
@@ -388,7 +423,8 @@ class BackgroundModel:
         if len(points) == 0:
             return
         cells, rng, _, _ = direction_cells(points, self.cfg.cell_deg)
-        _observe_kernel(cells, rng, self._bins[-1])
+        t_ms = (stamp_ns - self._t0) // 1_000_000
+        _observe_kernel(cells, rng, self._bins[-1], self._onsets[-1], int(t_ms))
         horiz = points[:, 0] ** 2 + points[:, 1] ** 2 < 30.0**2
         zi = np.floor((points[horiz, 2] - _Z_LO) / _Z_STEP).astype(np.int64)
         zi = zi[(zi >= 0) & (zi < len(self._zhist))]
@@ -397,14 +433,26 @@ class BackgroundModel:
     def _freeze(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         if self._static is not None and self._dilated is not None:
             return self._static, self._dilated
-        bins = self._bins
+        bins, onsets = self._bins, self._onsets
         if len(bins) >= 2 and self._frames_per_bin[-1] < 0.5 * max(self._frames_per_bin[:-1]):
-            last = bins.pop()
+            last, last_onset = bins.pop(), onsets.pop()
+            with np.errstate(invalid="ignore"):
+                newer = last < bins[-1] - np.maximum(
+                    _SAME_SURFACE_M, _SAME_SURFACE_FRACTION * bins[-1]
+                )
+            newer |= ~np.isfinite(bins[-1]) & np.isfinite(last)
+            onsets[-1] = np.where(newer, last_onset, onsets[-1])
             np.minimum(bins[-1], last, out=bins[-1])
+        self._arrival_cells = 0
         if bins:
-            stack = np.sort(np.stack(bins), axis=0)
+            raw = np.stack(bins)
+            stack = np.sort(raw, axis=0)
             k = max(1, int(np.floor(self.cfg.min_bin_fraction * len(bins) + 1e-9)))
             static = stack[k - 1].reshape(self._n_el, self._n_az)
+            if self.cfg.floating_max_size_m > 0 and self.cfg.arrival_after_s > 0:
+                arrived = self._arrivals(static, raw, np.stack(onsets))
+                self._arrival_cells = int(arrived.sum())
+                static = np.where(arrived, np.float32(np.inf), static)
         else:
             static = np.full((self._n_el, self._n_az), np.inf, dtype=np.float32)
         self._floating_cells = 0
@@ -444,8 +492,76 @@ class BackgroundModel:
         self._static = static.ravel().astype(np.float32)
         self._dilated = dilated.ravel().astype(np.float32)
         self._n_bins = len(bins)
-        self._bins = []  # no longer needed
+        self._bins, self._onsets = [], []  # no longer needed
         return self._static, self._dilated
+
+    def _arrivals(
+        self, static: NDArray[np.float32], raw: NDArray[np.float32], onsets: NDArray[np.int32]
+    ) -> NDArray[np.bool_]:
+        """Small blobs of static cells first reached late in the sequence (docstring, step 4)."""
+        cfg = self.cfg
+        flat = static.ravel()
+        with np.errstate(invalid="ignore"):
+            tol = np.maximum(_SAME_SURFACE_M, _SAME_SURFACE_FRACTION * flat)
+            same = np.abs(raw - flat) <= tol  # (B, cells) the bin's nearest is the static surface
+            front = raw < flat - tol  # something passed in front: that bin cannot tell
+        decisive = same | front
+        first = np.argmax(decisive, axis=0)
+        cols = np.arange(flat.size)
+        known = decisive[first, cols] & same[first, cols]
+        onset_ms = np.where(known, onsets[first, cols], -1)
+        n_el, n_az = static.shape
+        el = ((np.arange(n_el) + 0.5) * cfg.cell_deg - 90.0)[:, None] * np.ones((1, n_az))
+        near = (static <= cfg.floating_max_range_m) | (el >= cfg.floating_any_range_above_deg)
+        late = (onset_ms.reshape(n_el, n_az) >= 1000.0 * cfg.arrival_after_s) & near
+        late &= np.isfinite(static)
+        labels, n = ndimage.label(late, structure=np.ones((3, 3), dtype=bool))
+        out = np.zeros_like(late)
+        if n == 0:
+            return out
+        e_idx, a_idx = np.nonzero(labels)
+        lab = labels[e_idx, a_idx]
+        r = static[e_idx, a_idx].astype(np.float64)
+        elev = np.radians((e_idx + 0.5) * cfg.cell_deg - 90.0)
+        azim = np.radians((a_idx + 0.5) * cfg.cell_deg - 180.0)
+        xyz = np.stack(
+            [r * np.cos(elev) * np.cos(azim), r * np.cos(elev) * np.sin(azim), r * np.sin(elev)],
+            axis=1,
+        )
+        finite = np.isfinite(static)
+        for i in range(1, n + 1):
+            members = lab == i
+            if members.sum() < cfg.arrival_min_cells:
+                continue
+            p = xyz[members]
+            if float(np.max(p.max(axis=0) - p.min(axis=0))) > cfg.floating_max_size_m:
+                continue
+            seed = labels == i
+            out |= seed
+            # its rim: neighbouring cells on the same surface, reached a little earlier as the
+            # drone slowed into place; left static, dilation would hide the blob's edges again
+            r_seed = static[seed]
+            lo, hi = float(r_seed.min()), float(r_seed.max())
+            tol = max(0.5, 0.05 * hi)
+            with np.errstate(invalid="ignore"):
+                rim = ndimage.binary_dilation(seed, structure=np.ones((3, 3), dtype=bool))
+                rim &= ~seed & finite & (static >= lo - tol) & (static <= hi + tol)
+            if rim.any():
+                re, ra = np.nonzero(seed | rim)
+                rr = static[re, ra].astype(np.float64)
+                el_r = np.radians((re + 0.5) * cfg.cell_deg - 90.0)
+                az_r = np.radians((ra + 0.5) * cfg.cell_deg - 180.0)
+                q = np.stack(
+                    [
+                        rr * np.cos(el_r) * np.cos(az_r),
+                        rr * np.cos(el_r) * np.sin(az_r),
+                        rr * np.sin(el_r),
+                    ],
+                    axis=1,
+                )
+                if float(np.max(q.max(axis=0) - q.min(axis=0))) <= cfg.floating_max_size_m:
+                    out |= rim
+        return out
 
     # ---------------------------------------------------------------- queries
     @property
@@ -459,6 +575,12 @@ class BackgroundModel:
         """Direction cells cleared as small floating blobs (valid after the first ``classify``)."""
         self._freeze()
         return self._floating_cells
+
+    @property
+    def arrival_cells(self) -> int:
+        """Direction cells released as small blobs that arrived late (valid after ``classify``)."""
+        self._freeze()
+        return self._arrival_cells
 
     @property
     def cap_cells(self) -> int:

@@ -71,6 +71,45 @@ def test_small_blob_floating_in_free_space_all_along_is_not_background() -> None
     assert np.all(off.classify(pts)[on] != FOREGROUND)
 
 
+def _fly_in_then_hover(spot: Sphere, n_fly: int, n_hover: int) -> list[list[Sphere]]:
+    """A drone flying from 5 m away to ``spot`` in ``n_fly`` frames, then hovering there."""
+    start = np.asarray(spot[0]) + np.array([-4.0, -3.0, 0.5])
+    path = [start + (np.asarray(spot[0]) - start) * k / n_fly for k in range(n_fly)]
+    return [[(tuple(p), spot[1])] for p in path] + [[spot]] * n_hover
+
+
+def test_drone_that_flew_in_and_hovers_beside_a_post_is_not_background() -> None:
+    # 0.2 m beside the post: not floating in free space, and static for 83 % of the
+    # sequence; but the post was there from the start and the drone arrived after 1 s
+    spot: Sphere = ((6.0, -3.3, 0.8), 0.3)
+    frames = _fly_in_then_hover(spot, n_fly=10, n_hover=50)
+    model = _learn(frames)
+    assert model.arrival_cells >= 3
+    pts = scan(np.random.default_rng(5), [spot], n_rays=16000, boxes=[POST])
+    on = points_near(pts, spot[0], 0.35)
+    assert on.sum() >= 5
+    # most of it is foreground again (points within 0.3 m of the post's range stay MARGIN)
+    assert np.mean(model.classify(pts)[on] == FOREGROUND) > 0.5
+    off = _learn(frames, arrival_after_s=0.0)  # the rule switched off: erased
+    assert off.arrival_cells == 0
+    assert np.mean(off.classify(pts)[on] == FOREGROUND) < 0.1
+
+
+def test_the_same_object_there_from_the_start_stays_background() -> None:
+    spot: Sphere = ((6.0, -3.3, 0.8), 0.3)
+    model = _learn([[spot]] * 60)
+    assert model.arrival_cells == 0
+    pts = scan(np.random.default_rng(5), [spot], n_rays=16000, boxes=[POST])
+    on = points_near(pts, spot[0], 0.35)
+    assert on.sum() >= 5
+    assert np.all(model.classify(pts)[on] != FOREGROUND)
+
+
+@pytest.mark.parametrize("seed", [61, 62, 63])
+def test_a_static_scene_has_no_late_arrivals(seed: int) -> None:
+    assert _learn([[]] * 60, seed=seed).arrival_cells == 0
+
+
 def test_swaying_foliage_of_a_few_cm_is_background() -> None:
     rng = np.random.default_rng(3)
     base = rng.uniform([7.0, 3.0, 1.0], [8.5, 5.0, 3.0], (40, 3))  # a bush of 40 leaves
