@@ -24,6 +24,11 @@ of* that environment along a ray. The model is a static range image (pass 1, str
    range (by max(1 m, 10 % of its range)), and at most half of them nearer (occluding), is a
    drone hovering through (nearly) the whole sequence, not environment: its cells are cleared.
    Blobs are the 8-connected cells whose static ranges differ by at most max(0.5 m, 5 %).
+   One exception to the clearance: right below the blob, up to three cells of a separate
+   surface (not range-continuous with it) may be nearer than the clearance: a drone hovering
+   a metre above a post or pole top is seen with the top in the next cell down, only a few
+   tenths of a metre apart in range. A lamp head is attached to its pole (range-continuous),
+   so it stays part of the pole's blob.
    A drone hovering on (or just above) a pole top through the whole sequence is range-continuous
    with the pole, so it is not floating; neither is a lamp head. Both look like a small *cap*
    (at most ``floating_max_size_m``, nearer than ``floating_max_range_m``) on top of a column at
@@ -81,6 +86,9 @@ _Z_LO, _Z_HI, _Z_STEP = -30.0, 30.0, 0.05  # ground-height histogram, metres
 # two ranges in one cell belong to the same surface when within max(1 m, 10 %): the clearance
 # the floating-blob rule uses, far above range noise and foliage depth
 _SAME_SURFACE_M = 1.0
+# a floating blob may rest on a separate surface right below it this many cells wide (a pole or
+# post top: a drone hovering just above it)
+_MAX_SUPPORT_CELLS = 3
 _SAME_SURFACE_FRACTION = 0.1
 
 
@@ -185,6 +193,24 @@ def _classify_kernel(
 
 
 @numba.njit(cache=True)
+def _run_width(static: NDArray[np.float32], e: int, a: int) -> int:
+    """Cells in row ``e`` range-continuous with cell ``a`` in a run (counted up to 9)."""
+    n_az = static.shape[1]
+    width = 1
+    for step in (-1, 1):
+        prev = static[e, a]
+        aa = a
+        for _ in range(4):
+            aa = (aa + step) % n_az
+            r = static[e, aa]
+            if not np.isfinite(r) or abs(r - prev) > max(0.5, 0.05 * min(r, prev)):
+                break
+            width += 1
+            prev = r
+    return width
+
+
+@numba.njit(cache=True)
 def _floating_blobs(
     static: NDArray[np.float32], cell_deg: float, max_range: float, max_size: float, cone_el: float
 ) -> NDArray[np.bool_]:
@@ -192,6 +218,7 @@ def _floating_blobs(
     n_el, n_az = static.shape
     comp = np.full((n_el, n_az), -1, dtype=np.int64)
     out = np.zeros((n_el, n_az), dtype=np.bool_)
+    support = np.full((n_el, n_az), -1, dtype=np.int64)  # marks support cells per component
     stack = np.empty((n_el * n_az, 2), dtype=np.int64)
     members = np.empty((n_el * n_az, 2), dtype=np.int64)
     deg = np.pi / 180.0
@@ -229,6 +256,7 @@ def _floating_blobs(
             ok = True
             n_border = 0
             n_nearer = 0
+            n_support = 0
             lo = np.full(3, np.inf)
             hi = np.full(3, -np.inf)
             for k in range(m):
@@ -263,12 +291,21 @@ def _floating_blobs(
                         if not np.isfinite(rn):
                             continue
                         if abs(rn - r) < clearance:
-                            ok = False
+                            if de == -1 and abs(rn - r) > max(0.5, 0.05 * min(r, rn)):
+                                # right below, a separate surface: what it hovers over,
+                                # if it is a pole or post top (a narrow run in its row)
+                                if support[ee, aa] != n_comp:
+                                    support[ee, aa] = n_comp
+                                    n_support += 1
+                                    if _run_width(static, ee, aa) > _MAX_SUPPORT_CELLS:
+                                        ok = False
+                            else:
+                                ok = False
                         elif rn < r:
                             n_nearer += 1
                 if not ok:
                     break
-            if ok and 2 * n_nearer <= n_border:
+            if ok and 2 * n_nearer <= n_border and n_support <= _MAX_SUPPORT_CELLS:
                 for k in range(m):
                     out[members[k, 0], members[k, 1]] = True
             n_comp += 1

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cldet.config import BackgroundConfig
-from cldet.core.background import CORE, FOREGROUND, BackgroundModel
+from cldet.core.background import CORE, FOREGROUND, BackgroundModel, _floating_blobs
 from tests.core.scene import GROUND_Z, Sphere, points_near, scan
 
 NS = 100_000_000  # 10 Hz
@@ -192,6 +192,43 @@ def test_drone_hovering_on_a_pole_top_all_along_is_not_background(seed: int) -> 
     pole = np.all((pts > [4.3, 1.3, GROUND_Z + 0.3]) & (pts < [4.65, 1.65, 1.0]), axis=1)
     assert pole.sum() >= 5
     assert np.all(model.classify(pts)[pole] != FOREGROUND)
+
+
+def _range_image(cells: dict[tuple[int, int], float]) -> np.ndarray:
+    image = np.full((90, 180), np.inf, dtype=np.float32)
+    for (e, a), r in cells.items():
+        image[e, a] = r
+    return image
+
+
+def _floats(image: np.ndarray) -> np.ndarray:
+    return _floating_blobs(image, 2.0, 30.0, 1.2, np.radians(50.0))
+
+
+def test_a_blob_over_a_separate_pole_top_right_below_floats() -> None:
+    # a drone 8.7 m away hovering a metre above a pole top: the pole top shows in the next cell
+    # down at 8.1 m (0.6 m nearer, within the 1 m clearance, but a separate surface)
+    drone = {(66, 100): 8.7, (66, 101): 8.6, (65, 100): 8.9}
+    pole = {(64, 100): 8.1, (63, 100): 7.9, (62, 100): 7.8, (61, 100): 7.7}
+    out = _floats(_range_image(drone | pole))
+    assert all(out[c] for c in drone)
+    assert not any(out[c] for c in pole)
+
+
+def test_a_blob_continuous_with_the_pole_or_beside_a_surface_does_not_float() -> None:
+    drone = {(66, 100): 8.7, (66, 101): 8.6, (65, 100): 8.9}
+    # a lamp head: range-continuous with its pole, one blob that is not small
+    pole = {(64, 100): 8.6, (63, 100): 8.5, (62, 100): 8.4, (61, 100): 8.3, (60, 100): 8.2}
+    pole |= {(e, 100): 8.2 - 0.1 * (60 - e) for e in range(50, 60)}
+    assert not _floats(_range_image(drone | pole)).any()
+    # a separate surface beside it (not below): no free space around it
+    wall = {(e, a): 8.0 for e in range(55, 75) for a in range(102, 110)}
+    out = _floats(_range_image(drone | wall))
+    assert not any(out[c] for c in drone)
+    # a separate surface below but wide (a roof, a car): not a pole or post top
+    roof = {(64, a): 8.1 for a in range(97, 105)} | {(63, a): 8.0 for a in range(97, 105)}
+    out = _floats(_range_image(drone | roof))
+    assert not any(out[c] for c in drone)
 
 
 @pytest.mark.parametrize("seed", [31, 32])
