@@ -175,7 +175,14 @@ class TrackEstimator:
         t_s = (stamps - stamps[0]) / NS_PER_S
         tc = cfg.tracking
         ground = tc.ground_z_m if tc.ground_z_m is not None else self.background.ground_z()
-        scored = score_tracks(self._tracker.records(), self._tables, t_s, ground, tc)
+        scored = score_tracks(
+            self._tracker.records(),
+            self._tables,
+            t_s,
+            ground,
+            tc,
+            free_sky_deg=self.config.background.floating_any_range_above_deg,
+        )
         chain = select_chain(scored, tc)
         if not chain:
             pos = np.asarray(tc.fallback_position, dtype=np.float64)

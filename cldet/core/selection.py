@@ -26,7 +26,9 @@ each detection weighted by per-detection evidence and the track's factors:
   ``static_spread_m`` over the track's span (a swaying or flickering clump far away, whose
   sparse centroid jumps by half a metre frame to frame but goes nowhere): static clutter (a
   lamp head, a leaf clump), or a drone hovering the whole time (kept when nothing else is
-  there, but a real mover wins);
+  there, but a real mover wins). Not high in the Avia cone (median elevation at least the
+  background's ``floating_any_range_above_deg``, 50 deg): the sky there holds no small static
+  things, so a track hovering there is a drone;
 * motion consistency: a detection whose NIS exceeds 7.81 (the 95 % point of chi^2, 3 dof)
   weighs exp(-(NIS - 7.81) / 7.81): smooth motion keeps its weight, erratic speckle or a
   bird's jinks lose it;
@@ -85,8 +87,13 @@ def score_tracks(
     times_s: NDArray[np.float64],
     ground_z: float,
     cfg: TrackingConfig,
+    free_sky_deg: float = 90.0,
 ) -> list[ScoredTrack]:
-    """Score every candidate track of two detections or more (see the module docstring)."""
+    """Score every candidate track of two detections or more (see the module docstring).
+
+    ``free_sky_deg``: a static track whose median elevation is at least this is not
+    penalised (the background's ``floating_any_range_above_deg``).
+    """
     out = []
     for rec in records:
         h = len(rec.frames)
@@ -125,8 +132,10 @@ def score_tracks(
                 factor *= 1.0 - 0.7 * (v - cfg.cruise_speed) / (cfg.max_speed - cfg.cruise_speed)
         centre = np.median(pos, axis=0)
         spread = float(np.percentile(np.linalg.norm(pos - centre, axis=1), 90))
-        if spread < cfg.static_spread_m or (
-            spread < _JITTER_M and _net_motion(times_s[rec.frames], pos) < cfg.static_spread_m
+        elevation = np.degrees(np.arctan2(centre[2], np.hypot(centre[0], centre[1])))
+        if elevation < free_sky_deg and (
+            spread < cfg.static_spread_m
+            or (spread < _JITTER_M and _net_motion(times_s[rec.frames], pos) < cfg.static_spread_m)
         ):
             factor *= 0.3
         factor *= 1.0 + 0.5 * float(np.mean(both))

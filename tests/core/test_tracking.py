@@ -24,12 +24,14 @@ def _table(items: list[tuple[np.ndarray, float, int]]) -> ClusterTable:
     )
 
 
-def _run(tables: list[ClusterTable], cfg: TrackingConfig, dt: float = 0.1):  # type: ignore[no-untyped-def]
+def _run(
+    tables: list[ClusterTable], cfg: TrackingConfig, dt: float = 0.1, free_sky_deg: float = 50.0
+):  # type: ignore[no-untyped-def]
     tracker = CandidateTracker(cfg)
     for k, table in enumerate(tables):
         tracker.step(k, k * dt, table)
     times = np.arange(len(tables)) * dt
-    scored = score_tracks(tracker.records(), tables, times, GROUND, cfg)
+    scored = score_tracks(tracker.records(), tables, times, GROUND, cfg, free_sky_deg)
     return scored, select_chain(scored, cfg)
 
 
@@ -183,3 +185,29 @@ def test_a_flickering_clump_that_goes_nowhere_loses_to_a_sparse_far_mover() -> N
     clump = max((s for s in scored if s.positions[0, 0] < 0), key=lambda s: s.score)
     drone = max((s for s in scored if s.positions[0, 0] > 0), key=lambda s: s.score)
     assert clump.score < 0.5 * drone.score
+
+
+def test_a_drone_hovering_high_in_the_avia_cone_is_not_penalised_as_static_clutter() -> None:
+    # a drone hovering 47 m up (elevation 78 deg), seen in half of the frames, against a
+    # swaying clump 30 m away near the ground, seen less often, whose centroid wanders about a
+    # metre in a few seconds (enough to escape the static test)
+    rng = np.random.default_rng(11)
+    cfg = TrackingConfig()
+    tables = []
+    hover = np.array([-9.6, -0.9, 47.0])
+    for k in range(55):
+        items: list[tuple[np.ndarray, float, int]] = []
+        if rng.random() < 0.5:
+            items.append((hover + rng.normal(0, 0.05, 3), 0.2, 2))
+        if rng.random() < 0.4:
+            t = 0.1 * k
+            sway = np.array(
+                [0.0, 0.9 * np.sin(2 * np.pi * t / 11), 0.3 * np.sin(2 * np.pi * t / 7)]
+            )
+            clump = np.array([29.6, 0.6, GROUND + 2.1]) + sway + rng.normal(0, 0.1, 3)
+            items.append((clump, 0.4, 3))
+        tables.append(_table(items))
+    for free_sky_deg, drone_wins in ((50.0, True), (90.0, False)):
+        scored, chain = _run(tables, cfg, free_sky_deg=free_sky_deg)
+        assert chain
+        assert all(tr.positions[0, 2] > 40 for tr, _, _ in chain) == drone_wins
