@@ -312,6 +312,17 @@ def _floating_blobs(
     return out
 
 
+def _cells_extent(
+    static: NDArray[np.float32], e_idx: NDArray[np.int64], a_idx: NDArray[np.int64], cell_deg: float
+) -> float:
+    """Largest 3D extent (metres) of the cells' centre directions at their static ranges."""
+    r = static[e_idx, a_idx].astype(np.float64)
+    el = np.radians((e_idx + 0.5) * cell_deg - 90.0)
+    az = np.radians((a_idx + 0.5) * cell_deg - 180.0)
+    xyz = np.stack([r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)])
+    return float(np.max(xyz.max(axis=1) - xyz.min(axis=1)))
+
+
 def _continuous(r: float, rn: float) -> bool:
     """Two neighbouring static ranges belong to one surface (the blob continuity step)."""
     return abs(rn - r) <= max(0.5, 0.05 * min(r, rn))
@@ -335,7 +346,6 @@ def caps_on_columns(
     n_el, n_az = static.shape
     near = np.isfinite(static) & (static <= max_range)
     out = np.zeros((n_el, n_az), dtype=bool)
-    deg = np.pi / 180.0
 
     def linked(e: int, a: int, ee: int, aa: int) -> bool:
         return (
@@ -395,18 +405,11 @@ def caps_on_columns(
                 run, widest, row_e = nxt, max(widest, len(nxt)), row_e - 1
             if column is None:
                 continue
-            r_cap = np.array([static[c] for c in cap], dtype=np.float64)
-            el = (np.array([c[0] for c in cap]) + 0.5) * cell_deg * deg - np.pi / 2
-            az = (np.array([c[1] for c in cap]) + 0.5) * cell_deg * deg - np.pi
-            xyz = np.stack(
-                [
-                    r_cap * np.cos(el) * np.cos(az),
-                    r_cap * np.cos(el) * np.sin(az),
-                    r_cap * np.sin(el),
-                ]
-            )
-            if np.max(xyz.max(axis=1) - xyz.min(axis=1)) > max_size:
+            cap_e = np.array([c[0] for c in cap], dtype=np.int64)
+            cap_a = np.array([c[1] for c in cap], dtype=np.int64)
+            if _cells_extent(static, cap_e, cap_a, cell_deg) > max_size:
                 continue
+            r_cap = static[cap_e, cap_a].astype(np.float64)
             allowed = set(cap) | set(column)
             free = all(
                 not (np.isfinite(rn := float(static[ee, aa])) and rn <= r + max(0.5, 0.05 * r))
@@ -556,24 +559,14 @@ class BackgroundModel:
         out = np.zeros_like(late)
         if n == 0:
             return out
-        e_idx, a_idx = np.nonzero(labels)
-        lab = labels[e_idx, a_idx]
-        r = static[e_idx, a_idx].astype(np.float64)
-        elev = np.radians((e_idx + 0.5) * cfg.cell_deg - 90.0)
-        azim = np.radians((a_idx + 0.5) * cfg.cell_deg - 180.0)
-        xyz = np.stack(
-            [r * np.cos(elev) * np.cos(azim), r * np.cos(elev) * np.sin(azim), r * np.sin(elev)],
-            axis=1,
-        )
         finite = np.isfinite(static)
         for i in range(1, n + 1):
-            members = lab == i
-            if members.sum() < cfg.arrival_min_cells:
-                continue
-            p = xyz[members]
-            if float(np.max(p.max(axis=0) - p.min(axis=0))) > cfg.floating_max_size_m:
-                continue
             seed = labels == i
+            seed_e, seed_a = np.nonzero(seed)
+            if len(seed_e) < cfg.arrival_min_cells:
+                continue
+            if _cells_extent(static, seed_e, seed_a, cfg.cell_deg) > cfg.floating_max_size_m:
+                continue
             out |= seed
             # its rim: neighbouring cells on the same surface, reached a little earlier as the
             # drone slowed into place; left static, dilation would hide the blob's edges again
@@ -584,19 +577,8 @@ class BackgroundModel:
                 rim = ndimage.binary_dilation(seed, structure=np.ones((3, 3), dtype=bool))
                 rim &= ~seed & finite & (static >= lo - tol) & (static <= hi + tol)
             if rim.any():
-                re, ra = np.nonzero(seed | rim)
-                rr = static[re, ra].astype(np.float64)
-                el_r = np.radians((re + 0.5) * cfg.cell_deg - 90.0)
-                az_r = np.radians((ra + 0.5) * cfg.cell_deg - 180.0)
-                q = np.stack(
-                    [
-                        rr * np.cos(el_r) * np.cos(az_r),
-                        rr * np.cos(el_r) * np.sin(az_r),
-                        rr * np.sin(el_r),
-                    ],
-                    axis=1,
-                )
-                if float(np.max(q.max(axis=0) - q.min(axis=0))) <= cfg.floating_max_size_m:
+                grown_e, grown_a = np.nonzero(seed | rim)
+                if _cells_extent(static, grown_e, grown_a, cfg.cell_deg) <= cfg.floating_max_size_m:
                     out |= rim
         return out
 
