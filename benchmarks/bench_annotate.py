@@ -6,6 +6,7 @@ Rerun recording) and the challenge scores (MSE both ways, RMSE, accuracy) agains
     python benchmarks/bench_annotate.py                   # simulates the `full` preset in a temp dir
     python benchmarks/bench_annotate.py --data DATASET    # an existing dataset with test_truth.csv
     python benchmarks/bench_annotate.py --preset small    # quicker
+    python benchmarks/bench_annotate.py --all-points      # also cl-det over every valid point
 
 Everything runs in this process, one log after another (one core); the numba kernels are
 compiled by a warm-up run on the first log before anything is timed. The bias correction of
@@ -55,6 +56,12 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=2024, help="simulation seed")
     parser.add_argument("--split", default="test", help="split to annotate and score")
     parser.add_argument("--keep", type=Path, help="keep the work folder here instead of a temp dir")
+    parser.add_argument(
+        "--all-points",
+        action="store_true",
+        help="also time cl-det without environment removal (DBSCAN over every valid point, "
+        "the cost regime of the report's 14.9 predictions/s; slow)",
+    )
     args = parser.parse_args()
 
     work = args.keep or Path(tempfile.mkdtemp(prefix="cldet-bench-"))
@@ -96,6 +103,12 @@ def main() -> None:
             ("cl-det", "cl-det", True, {}),
             ("cl-det", "cl-det", False, {}),
         ]
+        if args.all_points:
+            every = {"baseline": {"environment": "none"}}
+            variants += [
+                ("cl-det", "cl-det-all", True, every),
+                ("cl-det", "cl-det-all", False, every),
+            ]
         rows = []
         speed: dict[tuple[str, bool], float] = {}
         for method, label, rrd, extra in variants:
@@ -141,6 +154,12 @@ def main() -> None:
             f"{speed[('track+bias', False)] / speed[('cl-det', False)]:.1f}x without"
         )
         print(f"MSE per coordinate cl-det / track+bias: {base_mse / track_mse:.0f}x")
+        if args.all_points:
+            print(
+                "speed track+bias / cl-det-all (DBSCAN over every valid point): "
+                f"{speed[('track+bias', True)] / speed[('cl-det-all', True)]:.1f}x with .rrd, "
+                f"{speed[('track+bias', False)] / speed[('cl-det-all', False)]:.1f}x without"
+            )
     finally:
         if args.keep is None:
             shutil.rmtree(work, ignore_errors=True)

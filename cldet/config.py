@@ -198,6 +198,18 @@ class BiasConfig(BaseModel):
     z_m: float = Field(default=0.0, description="add this to z")
 
 
+class BaselineConfig(BaseModel):
+    """The ``cl-det`` comparison method (see ``cldet.core.cldet_baseline``)."""
+
+    model_config = _STRICT
+
+    environment: Literal["learned", "none"] = Field(
+        default="learned",
+        description="environment removal: 'learned' static background (as issue 4 asks), or"
+        " 'none': DBSCAN over every valid Mid-360 point, the cost regime of the report's 14.9/s",
+    )
+
+
 class CldetConfig(BaseModel):
     """The whole estimator configuration."""
 
@@ -210,6 +222,7 @@ class CldetConfig(BaseModel):
     tracking: TrackingConfig = Field(default_factory=TrackingConfig)
     smoothing: SmoothingConfig = Field(default_factory=SmoothingConfig)
     bias: BiasConfig = Field(default_factory=BiasConfig)
+    baseline: BaselineConfig = Field(default_factory=BaselineConfig)
 
 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:

@@ -24,7 +24,7 @@ from cldet.core.estimator import (
     estimate_sequence,
     fuse_points,
 )
-from cldet.core.frames import pair_frames
+from cldet.core.frames import pair_frames, valid_points
 from cldet.types import LidarFrame, PositionSample, Source
 
 simulate = pytest.importorskip("cldet.simulate")
@@ -258,3 +258,20 @@ def test_real_sample_close_to_the_first_place_estimate(real_sample: Path) -> Non
     ]
     assert _rms(np.asarray(d)) < 0.2
     assert all(e.source == Source.DETECTED for e in result.estimates)
+
+
+def test_cldet_without_environment_clusters_every_valid_point(sim_root: Path) -> None:
+    sim = _simulated(sim_root, "mixed", HELD_OUT[0])
+    frames = sim.frames[:20]
+    learned, _ = estimate_sequence(lambda: frames, load_config(overrides={"method": "cl-det"}))
+    none, result = estimate_sequence(
+        lambda: frames,
+        load_config(overrides={"method": "cl-det", "baseline": {"environment": "none"}}),
+    )
+    for f, det_none, det_learned in zip(frames, none, learned, strict=True):
+        n_valid = len(valid_points(f.mid360))
+        assert len(det_none.foreground) == n_valid
+        assert len(det_learned.foreground) < 0.2 * n_valid
+        # the estimate is the mean of the largest cluster over all points
+        assert det_none.clusters[0].n_points == max(c.n_points for c in det_none.clusters)
+    assert len(result.estimates) == len(frames)
