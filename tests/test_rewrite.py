@@ -7,7 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap.reader import make_reader
+from mcap.records import Channel, Metadata, Schema
+from mcap.stream_reader import StreamReader
 from mcap.summary import Summary
+from mcap.writer import IndexType, Writer
 
 from cldet.errors import LogError
 from cldet.io import topics
@@ -211,3 +214,78 @@ def test_corrupt_source_names_the_file(tmp_path: Path) -> None:
         rewrite_log(bad, tmp_path / "out.mcap", [])
     assert not (tmp_path / "out.mcap").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.mcap"]
+
+
+# --- logs written by other tools ------------------------------------------------------------
+def _foreign_log(path: Path, **writer_options: object) -> Path:
+    """Ten /lidar messages and an up-front /cldet/old channel that never publishes."""
+    with open(path, "wb") as f:
+        writer = Writer(f, **writer_options)  # type: ignore[arg-type]
+        writer.start()
+        lidar = writer.register_channel(
+            "/lidar", "protobuf", writer.register_schema("a.Lidar", "protobuf", b"x")
+        )
+        writer.register_channel(
+            "/cldet/old", "protobuf", writer.register_schema("b.Old", "protobuf", b"yy")
+        )
+        for i in range(10):
+            stamp = 1_000_000_000 + i * 100_000_000
+            writer.add_message(lidar, stamp, b"d" * 10, stamp)
+        writer.add_metadata("cldet.config", {"old": "1"})
+        writer.finish()
+    return path
+
+
+def _records(path: Path) -> list[object]:
+    with open(path, "rb") as f:
+        return list(StreamReader(f, validate_crcs=True).records)
+
+
+def test_new_ids_stay_clear_of_a_replaced_channel_that_never_published(tmp_path: Path) -> None:
+    log = _foreign_log(tmp_path / "upfront.mcap")
+    out = tmp_path / "out.mcap"
+    rewrite_log(log, out, _pose_additions([3_000_000_000], 1.0), replace_metadata=["cldet.config"])
+    records = _records(out)
+    for kind in (Schema, Channel):
+        by_id: dict[int, object] = {}
+        for r in records:
+            if isinstance(r, kind):
+                assert by_id.setdefault(r.id, r) == r, f"two different {kind.__name__}s, id {r.id}"
+    assert [m[0] for m in _messages(out)] == ["/lidar"] * 10 + [topics.POSE]
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"use_chunking": False},  # every message outside chunks
+        {"index_types": IndexType.ALL & ~IndexType.METADATA},  # metadata without an index
+        {"index_types": IndexType.ALL & ~IndexType.MESSAGE},  # chunks without message indexes
+    ],
+)
+def test_unusual_layouts_are_copied_whole_then_appended_to(
+    options: dict[str, object], tmp_path: Path
+) -> None:
+    log = _foreign_log(tmp_path / "foreign.mcap", **options)
+    out = tmp_path / "out.mcap"
+    stats = rewrite_log(
+        log,
+        out,
+        _pose_additions([3_000_000_000], 1.0),
+        metadata={"cldet.config": {"new": "1"}},
+        replace_metadata=["cldet.config"],
+    )
+    assert stats.copied_messages == 10
+    assert [m[0] for m in _messages(out)] == ["/lidar"] * 10 + [topics.POSE]
+    assert [r.metadata for r in _records(out) if isinstance(r, Metadata)] == [{"new": "1"}]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["foreign.mcap", "out.mcap"]
+
+
+def test_a_log_without_messages_is_appended_to(tmp_path: Path) -> None:
+    log = tmp_path / "empty.mcap"
+    with open(log, "wb") as f, LogWriter(f) as writer:
+        writer.write_metadata(topics.METADATA_SOURCE, {"sequence": "seq0001"})
+    source, end = log.read_bytes(), _data_end(log)
+    rewrite_log(log, log, _pose_additions([5], 1.0))
+    assert [m[0] for m in _messages(log)] == [topics.POSE]
+    assert log.read_bytes()[:end] == source[:end]  # appended to, not rewritten
+    assert _metadata(log) == {topics.METADATA_SOURCE: {"sequence": "seq0001"}}

@@ -71,6 +71,8 @@ class AppendPlan:
     metadata_indexes: list[MetadataIndex]
     channel_message_counts: dict[int, int]
     dropped_messages: int  # messages of replaced channels beyond the cut
+    next_schema_id: int  # first id for new schemas (above every id the log defines)
+    next_channel_id: int  # first id for new channels
 
 
 def _footer_summary_start(stream: IO[bytes]) -> int | None:
@@ -86,6 +88,49 @@ def _footer_summary_start(stream: IO[bytes]) -> int | None:
     return int(summary_start)
 
 
+def _tail_is_replaceable(
+    stream: IO[bytes],
+    cut: int,
+    data_end: int,
+    chunk_offsets: set[int],
+    replace_metadata: Sequence[str],
+) -> bool:
+    """True when every record from ``cut`` to DataEnd is one a new append replaces.
+
+    That is: chunks listed in ``chunk_offsets`` (whose channels the caller checked are all
+    replaced), their message indexes, schema and channel records, and metadata records named in
+    ``replace_metadata``. Anything else (a message outside a chunk, an attachment, other
+    metadata, an unindexed chunk, an unknown record) would be lost by cutting there.
+    """
+    stream.seek(cut)
+    tail = stream.read(data_end - cut)
+    if len(tail) != data_end - cut:
+        return False
+    pos = 0
+    while pos < len(tail):
+        if pos + 9 > len(tail):
+            return False
+        opcode = tail[pos]
+        (length,) = struct.unpack_from("<Q", tail, pos + 1)
+        body = pos + 9
+        if body + length > len(tail):
+            return False
+        if opcode == Opcode.CHUNK:
+            if cut + pos not in chunk_offsets:
+                return False
+        elif opcode == Opcode.METADATA:
+            if length < 4:
+                return False
+            (name_len,) = struct.unpack_from("<I", tail, body)
+            name = tail[body + 4 : body + 4 + name_len].decode("utf-8", "replace")
+            if name not in replace_metadata:
+                return False
+        elif opcode not in (Opcode.MESSAGE_INDEX, Opcode.SCHEMA, Opcode.CHANNEL):
+            return False
+        pos = body + length
+    return True
+
+
 def plan_append(
     stream: IO[bytes],
     summary: Summary,
@@ -98,13 +143,24 @@ def plan_append(
     The cut is the end of the data section, or, when the log holds records to replace (channels
     whose topic starts with ``replace_prefix``, metadata named in ``replace_metadata``), the
     offset of the first of them: everything from there to the end of the data section must then
-    be such records (as an earlier append leaves them). Returns None when the log cannot be
-    continued this way (no chunk indexes or statistics, results interleaved with the sources,
-    an unusual layout); the caller then rewrites it in full.
+    be such records (as an earlier append leaves them; the bytes are checked record by record).
+    Returns None when the log cannot be continued this way (no statistics, statistics that do
+    not account for every message, metadata record or attachment by channel or index, messages
+    without a chunk index, results interleaved with the sources, anything else after the
+    results); the caller then rewrites it in full.
     """
     stats = summary.statistics
     chunks = summary.chunk_indexes
-    if stats is None or not chunks or stats.chunk_count != len(chunks):
+    if stats is None or stats.chunk_count != len(chunks):
+        return None
+    if not chunks and stats.message_count:
+        return None  # messages outside chunks
+    counts = dict(stats.channel_message_counts)
+    if sum(counts.values()) != stats.message_count or not set(counts) <= set(summary.channels):
+        return None  # per-channel counts missing: the new statistics could not be right
+    if stats.metadata_count != len(summary.metadata_indexes):
+        return None
+    if stats.attachment_count != len(summary.attachment_indexes):
         return None
     if any(not c.message_index_offsets or c.compression not in _COMPRESS for c in chunks):
         return None
@@ -131,12 +187,14 @@ def plan_append(
         return None
     if any(a.offset >= cut for a in summary.attachment_indexes):
         return None
+    offsets = {c.chunk_start_offset for c in tail_chunks}
+    if not _tail_is_replaceable(stream, cut, data_end, offsets, replace_metadata):
+        return None
     channels = {cid: c for cid, c in summary.channels.items() if cid not in replaced}
     used_schemas = {c.schema_id for c in channels.values()}
-    counts = dict(stats.channel_message_counts)
     return AppendPlan(
         cut=cut,
-        compression=chunks[0].compression,
+        compression=chunks[0].compression if chunks else "zstd",
         schemas={sid: s for sid, s in summary.schemas.items() if sid in used_schemas},
         channels=channels,
         chunk_indexes=kept_chunks,
@@ -144,6 +202,10 @@ def plan_append(
         metadata_indexes=[m for m in summary.metadata_indexes if m.offset < cut],
         channel_message_counts={cid: counts.get(cid, 0) for cid in channels},
         dropped_messages=sum(counts.get(cid, 0) for cid in replaced),
+        # new ids above every id the log defines, dropped ones included: a replaced channel
+        # that never published keeps its records before the cut
+        next_schema_id=max(summary.schemas, default=0) + 1,
+        next_channel_id=max(summary.channels, default=-1) + 1,
     )
 
 
@@ -196,8 +258,8 @@ class AppendWriter:
         self._chunk_indexes = list(plan.chunk_indexes)
         self._metadata_indexes = list(plan.metadata_indexes)
         self._chunk = _OpenChunk()
-        self._next_schema = max(self._schemas, default=0) + 1
-        self._next_channel = max(self._channels, default=-1) + 1
+        self._next_schema = plan.next_schema_id
+        self._next_channel = plan.next_channel_id
         self._compress = _COMPRESS[plan.compression]
 
     def _write(self, *records: McapRecord) -> int:

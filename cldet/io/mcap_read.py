@@ -28,6 +28,7 @@ from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 from mcap.reader import SeekingReader, make_reader
 from mcap.records import Attachment, Channel, ChunkIndex, Header, Message, Schema
+from mcap.stream_reader import StreamReader
 from mcap.summary import Summary
 from numpy.typing import NDArray
 
@@ -328,6 +329,19 @@ class LogReader:
                 f"expected {' or '.join(wanted)}"
             )
 
+    def records(self) -> Iterator[Any]:
+        """Every record of the file in file order, chunks expanded (``mcap.records`` objects).
+
+        Unlike the indexed readers this sees everything, messages outside chunks included.
+        """
+        try:
+            with open(self.path, "rb") as f:
+                yield from StreamReader(f, validate_crcs=True).records
+        except OSError as err:
+            raise LogError(f"cannot read {self.path}: {err.strerror or err}") from err
+        except Exception as err:
+            raise LogError(f"cannot read {self.path} record by record (corrupt?): {err}") from err
+
     # --- continuing the log (cldet.io.mcap_append) ---------------------------------------------
     def plan_append(
         self, replace_prefix: str, replace_metadata: Sequence[str]
@@ -397,8 +411,9 @@ class LogReader:
         Each run can be read chunk after chunk with :func:`_chunk_messages`, far faster than the
         generic reader (which parses every record field by field); the runs are merged by time.
         A log written by cldet has one run per writer (the sources, the appended results).
-        None when some message is not in a chunk, a compression is unknown, or the chunks
-        interleave too much: then the generic reader is used.
+        None when the log has no chunk index, a compression is unknown, or the chunks
+        interleave too much: then the generic reader is used. It does not see messages
+        written outside chunks (a chunked writer writes none).
         """
         stats = self._summary.statistics
         chunks = self._summary.chunk_indexes

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
+from mcap.records import Attachment, Channel, Message, Metadata, Schema
+
 from cldet.errors import LogError
 from cldet.io.mcap_append import AppendPlan
 from cldet.io.mcap_read import LogReader, open_log
@@ -108,21 +110,44 @@ def _append(
 def _copy_without(
     reader: LogReader, out: IO[bytes], replace_prefix: str, replace_metadata: Sequence[str]
 ) -> tuple[int, int]:
-    """Copy every message, metadata record and attachment except the replaced ones."""
+    """Copy every message, metadata record and attachment except the replaced ones.
+
+    Record by record in file order (not through the chunk index), so that nothing a writer put
+    outside chunks or indexes is lost.
+    """
     copied = dropped = 0
     compression = {"lz4": Compression.lz4, "": Compression.none}.get(
         reader.chunk_compression(), Compression.zstd
     )
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
     with LogWriter(out, compression=compression, profile=reader.header().profile) as writer:
-        for schema, channel, message in reader.iter_messages():
-            if channel.topic.startswith(replace_prefix):
-                dropped += 1
-                continue
-            writer.write_raw(schema, channel, message.log_time, message.publish_time, message.data)
-            copied += 1
-        for name, values in reader.metadata_records():
-            if name not in replace_metadata:
-                writer.write_metadata(name, values)
-        for attachment in reader.attachments():
-            writer.write_attachment(attachment)
+        for record in reader.records():
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message):
+                channel = channels.get(record.channel_id)
+                if channel is None:
+                    raise LogError(
+                        f"{reader.path}: a message at {record.log_time} ns on channel "
+                        f"{record.channel_id}, which no earlier channel record defines"
+                    )
+                if channel.topic.startswith(replace_prefix):
+                    dropped += 1
+                    continue
+                writer.write_raw(
+                    schemas.get(channel.schema_id),
+                    channel,
+                    record.log_time,
+                    record.publish_time,
+                    record.data,
+                )
+                copied += 1
+            elif isinstance(record, Metadata):
+                if record.name not in replace_metadata:
+                    writer.write_metadata(record.name, dict(record.metadata))
+            elif isinstance(record, Attachment):
+                writer.write_attachment(record)
     return copied, dropped
