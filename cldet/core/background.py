@@ -89,6 +89,7 @@ _SAME_SURFACE_M = 1.0
 # a floating blob may rest on a separate surface right below it this many cells wide (a pole or
 # post top: a drone hovering just above it)
 _MAX_SUPPORT_CELLS = 3
+_GROUND_BAND_M = 0.5  # a static surface this close to the ground height is the ground
 _SAME_SURFACE_FRACTION = 0.1
 
 
@@ -631,6 +632,35 @@ class BackgroundModel:
         return _classify_kernel(
             cells, rng, static, dilated, self._slack, self.cfg.margin_m, self.cfg.margin_fraction
         )
+
+    def hidden_below(self, points: NDArray[np.floating]) -> NDArray[np.bool_]:
+        """For each point (N,3): would a point one cell lower, at the same range, be background?
+
+        ... and that background is the ground (its static surface there lies within 0.5 m of
+        the ground height). Then whatever continues below it is not seen: a walking person's
+        legs in front of the ground seen at a grazing angle fall within the ground's margin,
+        leaving the upper body as foreground.
+        """
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if len(p) == 0:
+            return np.zeros(0, dtype=bool)
+        h = np.hypot(p[:, 0], p[:, 1])
+        r = np.hypot(h, p[:, 2])
+        el = np.arctan2(p[:, 2], h) - np.radians(self.cfg.cell_deg)
+        scale = np.where(h > 0, r * np.cos(el) / np.maximum(h, 1e-9), 0.0)
+        probe = np.stack([p[:, 0] * scale, p[:, 1] * scale, r * np.sin(el)], axis=1)
+        hidden = self.classify(probe.astype(np.float32)) != FOREGROUND
+        # ... by the ground: a drone hovering over a car or a pole top has them right below
+        static, dilated = self._freeze()
+        cells, _, _, _ = direction_cells(probe.astype(np.float32), self.cfg.cell_deg)
+        behind = np.fmin(static[cells], dilated[cells]).astype(np.float64)
+        with np.errstate(invalid="ignore"):
+            ground_z = behind * np.sin(el)
+        # the surface's height is known to about its range times a cell's angle
+        band = _GROUND_BAND_M + behind * np.tan(np.radians(self.cfg.cell_deg))
+        with np.errstate(invalid="ignore"):
+            on_ground = ground_z < self.ground_z() + band
+        return hidden & np.isfinite(behind) & on_ground
 
     def is_background(self, points: NDArray[np.floating]) -> NDArray[np.bool_]:
         """True for points that are (dilated) background."""

@@ -34,7 +34,7 @@ per-axis 1-sigma position uncertainty (the model is isotropic).
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
@@ -157,6 +157,14 @@ class TrackEstimator:
         labels = cluster_points(fg, cfg.clustering.eps_m, cfg.clustering.min_samples)
         clusters = summarize_clusters(fg, labels, n_mid_fg)
         table = ClusterTable.from_clusters(clusters)
+        if len(clusters):
+            # a cluster whose continuation below is hidden by the background (a person's legs
+            # in the ground's margin) may reach the ground: its height evidence says so
+            low = table.low_z()
+            bottom = np.column_stack([table.centroid[:, :2], low])
+            hidden = self.background.hidden_below(bottom)
+            if hidden.any():
+                table = replace(table, lower_z=np.where(hidden, self.background.ground_z(), low))
         self._stamps.append(frame.stamp_ns)
         self._tables.append(table)
         self._tracker.step(index, (frame.stamp_ns - self._stamps[0]) / NS_PER_S, table, pts)

@@ -15,7 +15,10 @@ each detection weighted by per-detection evidence and the track's factors:
   real data) may extend below what is seen, so it counts as reaching the ground: a person
   walking close past the sensor shows only the upper body (lowest visible point ~1.2 m above
   the ground, extent < 1.2 m), like a small object floating at head height. A drone that low
-  and that close to the sensor weighed only 0.1 to ~0.4 anyway;
+  and that close to the sensor weighed only 0.1 to ~0.4 anyway. Likewise a cluster whose
+  continuation one cell below is hidden by the background (``BackgroundModel.hidden_below``:
+  farther out, the ground seen at a grazing angle swallows everything below about the sensor's
+  height, so a walking person shows only head and shoulders) counts as reaching the ground;
 * raw: a detection from the raw-point gate (no cluster) weighs ``raw_weight`` (0.5);
 * speed: factor 0.1 when the track's 90th-percentile filtered speed exceeds ``max_speed``
   (15 m/s); above ``cruise_speed`` (8 m/s: survey and filming flights are slower; a crossing

@@ -305,3 +305,30 @@ def test_drone_hovering_high_in_the_avia_cone_all_along_is_not_background(seed: 
     for k, spheres in enumerate(frames):
         low.observe(k * NS, _cone_scan(rng, spheres))
     assert np.all(low.classify(pts)[on] != FOREGROUND)
+
+
+def test_hidden_below_is_true_where_the_ground_margin_would_swallow_what_continues() -> None:
+    model = _learn([[]] * 60)
+    h = 15.0
+
+    def at(el_deg: float, range_m: float, az_deg: float = 180.0) -> list[float]:
+        el, az = np.radians(el_deg), np.radians(az_deg)
+        return [
+            range_m * np.cos(el) * np.cos(az),
+            range_m * np.cos(el) * np.sin(az),
+            range_m * np.sin(el),
+        ]
+
+    # at 15 m everything below the sensor's height (1.5 m up) lies within the margin of the
+    # ground seen at a grazing angle behind it: a person there shows only head and shoulders
+    points = np.array(
+        [
+            at(0.5, h),  # a shoulder 1.6 m up: one cell lower is swallowed by the ground
+            at(10.0, h),  # a drone 15 m out, 4 m up: below it only far ground or sky
+            at(10.0, 10.0, az_deg=0.0),  # a drone 2 m in front of the wall
+            [6.0, -4.0, 1.3],  # a drone hovering over the post: what lies below is not ground
+        ],
+        dtype=np.float32,
+    )
+    assert np.all(model.classify(points) == FOREGROUND)  # all four are seen
+    assert model.hidden_below(points).tolist() == [True, False, False, False]
