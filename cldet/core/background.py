@@ -148,6 +148,18 @@ def _cells_kernel(
 
 
 @numba.njit(cache=True)
+def _continuous(r: float, rn: float) -> bool:
+    """Two neighbouring static ranges belong to one surface (the blob continuity step)."""
+    return abs(rn - r) <= max(0.5, 0.05 * min(r, rn))
+
+
+@numba.njit(cache=True)
+def _clearance(r: float) -> float:
+    """Ranges this far apart, or more, are separate surfaces beyond doubt: max(1 m, 10 %)."""
+    return max(_SAME_SURFACE_M, _SAME_SURFACE_FRACTION * r)
+
+
+@numba.njit(cache=True)
 def _observe_kernel(
     cells: NDArray[np.int64],
     rng: NDArray[np.float32],
@@ -166,7 +178,7 @@ def _observe_kernel(
         cur = nearest[c]
         if r >= cur:
             continue
-        if not np.isfinite(cur) or r < cur - max(_SAME_SURFACE_M, _SAME_SURFACE_FRACTION * cur):
+        if not np.isfinite(cur) or r < cur - _clearance(cur):
             onset[c] = t_ms
         nearest[c] = r
 
@@ -204,7 +216,7 @@ def _run_width(static: NDArray[np.float32], e: int, a: int) -> int:
         for _ in range(4):
             aa = (aa + step) % n_az
             r = static[e, aa]
-            if not np.isfinite(r) or abs(r - prev) > max(0.5, 0.05 * min(r, prev)):
+            if not np.isfinite(r) or not _continuous(prev, r):
                 break
             width += 1
             prev = r
@@ -249,7 +261,7 @@ def _floating_blobs(
                         rn = static[ee, aa]
                         if comp[ee, aa] >= 0 or not np.isfinite(rn):
                             continue
-                        if abs(rn - r) <= max(0.5, 0.05 * min(r, rn)):
+                        if _continuous(r, rn):
                             comp[ee, aa] = n_comp
                             stack[top, 0], stack[top, 1] = ee, aa
                             top += 1
@@ -278,7 +290,7 @@ def _floating_blobs(
                     ok = False
                     break
                 # every other neighbour: empty, or far in front or behind (free space around it)
-                clearance = max(1.0, 0.1 * r)
+                clearance = _clearance(r)
                 for de in (-1, 0, 1):
                     ee = e + de
                     if ee < 0 or ee >= n_el:
@@ -292,7 +304,7 @@ def _floating_blobs(
                         if not np.isfinite(rn):
                             continue
                         if abs(rn - r) < clearance:
-                            if de == -1 and abs(rn - r) > max(0.5, 0.05 * min(r, rn)):
+                            if de == -1 and not _continuous(r, rn):
                                 # right below, a separate surface: what it hovers over,
                                 # if it is a pole or post top (a narrow run in its row)
                                 if support[ee, aa] != n_comp:
@@ -322,11 +334,6 @@ def _cells_extent(
     az = np.radians((a_idx + 0.5) * cell_deg - 180.0)
     xyz = np.stack([r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)])
     return float(np.max(xyz.max(axis=1) - xyz.min(axis=1)))
-
-
-def _continuous(r: float, rn: float) -> bool:
-    """Two neighbouring static ranges belong to one surface (the blob continuity step)."""
-    return abs(rn - r) <= max(0.5, 0.05 * min(r, rn))
 
 
 def caps_on_columns(
@@ -371,7 +378,7 @@ def caps_on_columns(
             e >= 1
             and near[e - 1, (a + da) % n_az]
             and abs(float(static[e - 1, (a + da) % n_az]) - float(static[e, a]))
-            < max(1.0, 0.1 * float(static[e, a]))
+            < _clearance(float(static[e, a]))
             for a in run
             for da in (-1, 0, 1)
         )
@@ -636,10 +643,11 @@ class BackgroundModel:
     def hidden_below(self, points: NDArray[np.floating]) -> NDArray[np.bool_]:
         """For each point (N,3): would a point one cell lower, at the same range, be background?
 
-        ... and that background is the ground (its static surface there lies within 0.5 m of
-        the ground height). Then whatever continues below it is not seen: a walking person's
-        legs in front of the ground seen at a grazing angle fall within the ground's margin,
-        leaving the upper body as foreground.
+        ... and that background is the ground: its static surface there lies within 0.5 m plus
+        the cell's own height uncertainty (range times a cell's angle) of the ground height.
+        Then whatever continues below it is not seen: a walking person's legs in front of the
+        ground seen at a grazing angle fall within the ground's margin, leaving the upper body
+        as foreground.
         """
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if len(p) == 0:
@@ -649,17 +657,25 @@ class BackgroundModel:
         el = np.arctan2(p[:, 2], h) - np.radians(self.cfg.cell_deg)
         scale = np.where(h > 0, r * np.cos(el) / np.maximum(h, 1e-9), 0.0)
         probe = np.stack([p[:, 0] * scale, p[:, 1] * scale, r * np.sin(el)], axis=1)
-        hidden = self.classify(probe.astype(np.float32)) != FOREGROUND
-        # ... by the ground: a drone hovering over a car or a pole top has them right below
         static, dilated = self._freeze()
-        cells, _, _, _ = direction_cells(probe.astype(np.float32), self.cfg.cell_deg)
-        behind = np.fmin(static[cells], dilated[cells]).astype(np.float64)
-        with np.errstate(invalid="ignore"):
-            ground_z = behind * np.sin(el)
-        # the surface's height is known to about its range times a cell's angle
+        cells, rng, _, _ = direction_cells(probe.astype(np.float32), self.cfg.cell_deg)
+        hidden = (
+            _classify_kernel(
+                cells,
+                rng,
+                static,
+                dilated,
+                self._slack,
+                self.cfg.margin_m,
+                self.cfg.margin_fraction,
+            )
+            != FOREGROUND
+        )
+        # ... by the ground: a drone hovering over a car or a pole top has them right below
+        behind = dilated[cells].astype(np.float64)  # the nearest static surface around
         band = _GROUND_BAND_M + behind * np.tan(np.radians(self.cfg.cell_deg))
         with np.errstate(invalid="ignore"):
-            on_ground = ground_z < self.ground_z() + band
+            on_ground = behind * np.sin(el) < self.ground_z() + band
         return hidden & np.isfinite(behind) & on_ground
 
     def is_background(self, points: NDArray[np.floating]) -> NDArray[np.bool_]:
