@@ -39,6 +39,16 @@ def _find(parent: NDArray[np.int64], i: int) -> int:
 
 
 @numba.njit(cache=True)
+def _dist2(points: NDArray[np.float64], i: int, j: int) -> float:
+    """Squared distance between points i and j."""
+    dd = 0.0
+    for d in range(3):
+        t = points[i, d] - points[j, d]
+        dd += t * t
+    return dd
+
+
+@numba.njit(cache=True)
 def _sorted_grid(
     points: NDArray[np.float64], h: float, pad: int
 ) -> tuple[
@@ -125,10 +135,7 @@ def _neighbour_pairs(
                         b0 = a + 1 if cj == ci else starts[cj]
                         for b in range(b0, starts[cj + 1]):
                             j = order[b]
-                            dd = 0.0
-                            for d in range(3):
-                                t = points[i, d] - points[j, d]
-                                dd += t * t
+                            dd = _dist2(points, i, j)
                             if dd <= eps2:
                                 if m == cap:
                                     cap *= 2
@@ -269,11 +276,7 @@ def _grid_components(points: NDArray[np.float64], eps: float) -> NDArray[np.int6
                                     i = order[a]
                                     for b in range(starts[cj], starts[cj + 1]):
                                         j = order[b]
-                                        dd = 0.0
-                                        for d in range(3):
-                                            t = points[i, d] - points[j, d]
-                                            dd += t * t
-                                        if dd <= eps2:
+                                        if _dist2(points, i, j) <= eps2:
                                             linked = True
                                             break
                                     if linked:
