@@ -381,16 +381,17 @@ class LogReader:
             topic_names = [topic_names]
         wanted = None if topic_names is None else list(topic_names)
         try:
-            runs = self._chunk_runs(wanted)
+            ids = self._wanted_ids(wanted)
+            runs = self._chunk_runs(ids)
             if runs is None:
                 yield from self._reader.iter_messages(
                     topics=wanted, starting_at=start_ns, ending_before=end_ns
                 )
             elif len(runs) == 1:
-                yield from self._iter_chunks(runs[0], wanted, start_ns, end_ns)
+                yield from self._iter_chunks(runs[0], ids, start_ns, end_ns)
             else:  # e.g. the sources, then the results appended by `cldet annotate`
                 yield from heapq.merge(
-                    *(self._iter_chunks(run, wanted, start_ns, end_ns) for run in runs),
+                    *(self._iter_chunks(run, ids, start_ns, end_ns) for run in runs),
                     key=lambda item: item[2].log_time,
                 )
         except LogError:
@@ -405,8 +406,8 @@ class LogReader:
         names = set(wanted)
         return {cid for cid, ch in self._summary.channels.items() if ch.topic in names}
 
-    def _chunk_runs(self, wanted: list[str] | None) -> list[list[ChunkIndex]] | None:
-        """The chunks holding ``wanted``, as a few runs of chunks that do not overlap in time.
+    def _chunk_runs(self, ids: set[int] | None) -> list[list[ChunkIndex]] | None:
+        """The chunks holding channels ``ids`` (None: all), as runs that do not overlap in time.
 
         Each run can be read chunk after chunk with :func:`_chunk_messages`, far faster than the
         generic reader (which parses every record field by field); the runs are merged by time.
@@ -421,7 +422,6 @@ class LogReader:
             return None
         if any(c.compression not in _DECOMPRESS for c in chunks):
             return None
-        ids = self._wanted_ids(wanted)
         relevant = sorted(
             (
                 c
@@ -448,13 +448,12 @@ class LogReader:
     def _iter_chunks(
         self,
         run: list[ChunkIndex],
-        wanted: list[str] | None,
+        ids: set[int] | None,
         start_ns: int | None,
         end_ns: int | None,
     ) -> Iterator[tuple[Schema | None, Channel, Message]]:
         channels = self._summary.channels
         schemas = self._summary.schemas
-        ids = self._wanted_ids(wanted)
         if ids is not None and not ids:
             return
         for index in run:
