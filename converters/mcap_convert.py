@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from queue import Empty
 from typing import Any
@@ -159,6 +159,7 @@ class _Job:
     compression: Compression
     images: bool
     overwrite: bool
+    index: int = 0  # position in the run: tags the job's progress messages
 
 
 @dataclass(frozen=True)
@@ -169,6 +170,7 @@ class _Outcome:
     bytes_out: int = 0
     error: str | None = None
     cpu_seconds: float = 0.0
+    advanced: int = 0  # progress units the worker counted, in all (parallel runs only)
 
 
 def _source_bytes(seq: mmaud.SequenceRef, modalities: Sequence[str]) -> int:
@@ -203,11 +205,17 @@ def _run_job(job: _Job, progress: Progress) -> _Outcome:
 
 
 class _QueueProgress:
-    """Forwards a worker's progress to the parent in batches (few queue messages)."""
+    """Forwards a worker's progress to the parent in batches of ``(job index, n)`` messages.
 
-    def __init__(self, queue: Any) -> None:
+    The queue only makes the bar move while a job runs: the job's outcome carries its total
+    (``counted``), which the parent's :class:`_ProgressLedger` settles exactly.
+    """
+
+    def __init__(self, queue: Any, index: int) -> None:
         self._queue = queue
+        self._index = index
         self._pending = 0
+        self.counted = 0
         self._last = time.monotonic()
 
     def start(self, total: int, description: str) -> None:
@@ -216,6 +224,7 @@ class _QueueProgress:
     def advance(self, n: int = 1) -> None:
         """Count ``n`` frames; send the count every 64 frames or 0.2 s."""
         self._pending += n
+        self.counted += n
         now = time.monotonic()
         if self._pending >= 64 or now - self._last > 0.2:
             self.flush()
@@ -224,8 +233,37 @@ class _QueueProgress:
     def flush(self) -> None:
         """Send what has been counted."""
         if self._pending:
-            self._queue.put(self._pending)
+            self._queue.put((self._index, self._pending))
             self._pending = 0
+
+
+class _ProgressLedger:
+    """The parent's side: forwards workers' counts once each, whatever order they arrive in.
+
+    Messages still in the queue when a job's outcome arrives are not lost: the outcome's total
+    settles the job (the difference is advanced at once) and its late messages are dropped.
+    """
+
+    def __init__(self, progress: Progress) -> None:
+        self._progress = progress
+        self._received: dict[int, int] = {}
+        self._settled: set[int] = set()
+
+    def message(self, index: int, n: int) -> None:
+        """A count from the queue."""
+        if index in self._settled:
+            return
+        self._received[index] = self._received.get(index, 0) + n
+        self._progress.advance(n)
+
+    def settle(self, index: int, total: int) -> None:
+        """The job is done and counted ``total`` in all."""
+        if index in self._settled:
+            return
+        self._settled.add(index)
+        rest = total - self._received.pop(index, 0)
+        if rest > 0:
+            self._progress.advance(rest)
 
 
 _worker_queue: Any = None
@@ -237,11 +275,9 @@ def _init_worker(queue: Any) -> None:
 
 
 def _worker(job: _Job) -> _Outcome:
-    progress = _QueueProgress(_worker_queue)
-    try:
-        return _run_job(job, progress)
-    finally:
-        progress.flush()
+    progress = _QueueProgress(_worker_queue, job.index)
+    outcome = _run_job(job, progress)
+    return replace(outcome, advanced=progress.counted)
 
 
 # --- the whole dataset -----------------------------------------------------------------------
@@ -267,12 +303,14 @@ class _Tally:
         self.bytes_out += outcome.bytes_out
 
 
-def _drain(queue: Any, progress: Progress) -> None:
+def _drain(queue: Any, ledger: _ProgressLedger) -> None:
+    """Forward the counts waiting in the queue (those in transit come with the outcomes)."""
     while True:
         try:
-            progress.advance(queue.get_nowait())
+            index, n = queue.get_nowait()
         except Empty:
             return
+        ledger.message(index, n)
 
 
 def _run_parallel(
@@ -290,14 +328,16 @@ def _run_parallel(
     executor = ProcessPoolExecutor(
         max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(queue,)
     )
+    ledger = _ProgressLedger(progress)
     try:
         pending: set[Future[_Outcome]] = {executor.submit(_worker, job) for job in jobs}
         while pending:
             done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-            _drain(queue, progress)
+            _drain(queue, ledger)
             for future in done:
-                record(future.result())
-        _drain(queue, progress)
+                outcome = future.result()
+                ledger.settle(outcome.job.index, outcome.advanced)
+                record(outcome)
     except BrokenProcessPool as err:
         raise CldetError(
             f"a conversion worker process died ({err}); was it killed, or out of memory?"
@@ -372,7 +412,7 @@ def convert_dataset(
         except OSError as err:
             raise CldetError(f"cannot create output folder {target.parent}: {err}") from err
         total += sum(n for m, n in counts.items() if images or m != "Image")
-        jobs.append(_Job(seq, target, codec, images, overwrite))
+        jobs.append(_Job(seq, target, codec, images, overwrite, index=len(jobs)))
 
     bar.start(total, "converting")
     n_workers = min(workers if workers is not None else (os.cpu_count() or 1), len(jobs))

@@ -357,6 +357,28 @@ def test_bad_sequence_is_reported_and_others_convert(
     assert "FAILED 1 sequence(s)" in report.describe() and str(bad) in report.describe()
 
 
+def test_parallel_progress_counts_every_frame_exactly(tiny: Path, tmp_path: Path) -> None:
+    progress = CountingProgress()
+    report = convert_dataset(tiny, tmp_path / "logs", workers=2, progress=progress)
+    assert report.ok and report.frames == progress.total == progress.done > 0
+
+
+def test_progress_ledger_settles_counts_still_in_transit() -> None:
+    """Counts a worker queued but the parent had not read when the outcome came are not lost."""
+    progress = CountingProgress()
+    ledger = mcap_convert._ProgressLedger(progress)
+    ledger.message(0, 64)
+    ledger.message(1, 10)
+    ledger.settle(0, 100)  # job 0's last 36 were still in the queue
+    assert progress.done == 110
+    ledger.message(0, 36)  # ... and arrive late: dropped, not counted twice
+    ledger.settle(0, 100)
+    assert progress.done == 110
+    ledger.settle(1, 10)
+    ledger.settle(2, 5)  # a job whose messages never arrived at all
+    assert progress.done == 115
+
+
 def test_existing_output_is_skipped_unless_overwrite(tiny: Path, tmp_path: Path) -> None:
     out = tmp_path / "logs"
     convert_dataset(tiny, out, splits=["val"], workers=1)
