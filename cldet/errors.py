@@ -15,12 +15,37 @@ class LogError(CldetError):
     """An MCAP log cannot be read or written as expected (missing topic, corrupt file, ...)."""
 
 
+class CorruptMessageError(LogError):
+    """One message of a log cannot be decoded; names the log, the topic and the stamp."""
+
+    def __init__(self, message: str, *, log: object, topic: str, stamp_ns: int) -> None:
+        super().__init__(message)
+        self.log = log
+        self.topic = topic
+        self.stamp_ns = stamp_ns  # the message's log time, integer ns
+
+    def __reduce__(self) -> tuple[object, ...]:  # pickled across worker processes
+        return (_corrupt_message, (str(self), self.log, self.topic, self.stamp_ns))
+
+
+def _corrupt_message(message: str, log: object, topic: str, stamp_ns: int) -> CorruptMessageError:
+    return CorruptMessageError(message, log=log, topic=topic, stamp_ns=stamp_ns)
+
+
+class FrameOrderError(CldetError):
+    """Frames reached the estimator out of stamp order, or two frames share one stamp."""
+
+
 class ConfigError(CldetError):
     """A configuration file or option is invalid (unknown key, wrong type, bad value)."""
 
 
 class ResultsError(CldetError):
     """A results, timestamps or truth CSV is malformed or does not match what it is scored against."""
+
+
+class OutputError(CldetError):
+    """An output cannot be written where it was asked (missing folder, a directory, no access)."""
 
 
 class OutputExistsError(CldetError):

@@ -32,6 +32,7 @@ from cldet.core.estimator import FrameDetections, SequenceEstimate, make_estimat
 from cldet.core.frames import pair_frames
 from cldet.errors import CldetError, LogError
 from cldet.io import topics
+from cldet.io.files import check_output
 from cldet.io.mcap_read import iter_clouds, iter_positions, open_log
 from cldet.io.mcap_write import LogWriter
 from cldet.io.rewrite import Addition, rewrite_log
@@ -106,12 +107,16 @@ def annotate_log(
 
     Raises:
         LogError: the log cannot be read or has no ``/lidar_360`` channel.
+        OutputError: an output cannot be written there (checked before any work).
     """
     started = time.perf_counter()
     config = config or CldetConfig()
     progress = progress or NullProgress()
     log = Path(log)
     output = Path(output) if output is not None else log
+    check_output(output, "annotated log")  # up front: fail before any work
+    if write_rrd:
+        check_output(Path(rrd) if rrd is not None else output.with_suffix(".rrd"), "recording")
     with open_log(log) as reader:
         found = reader.list_topics()
         source_meta = reader.metadata().get(topics.METADATA_SOURCE, {})

@@ -301,6 +301,57 @@ def test_corrupt_chunk_names_file_and_topic(tmp_path: Path) -> None:
         list(iter_clouds(path, tp.LIDAR_360))
 
 
+def write_log_with_a_corrupt_cloud(path: Path, bad_index: int = 2, n: int = 5) -> int:
+    """A log of ``n`` Mid-360 clouds whose ``bad_index``-th message is not protobuf; its stamp."""
+    rng = np.random.default_rng(3)
+    source = io.BytesIO()
+    with LogWriter(source) as writer:
+        for i in range(n):
+            writer.write_cloud(tp.LIDAR_360, T0 + i * 100_000_000, random_cloud(rng, 9), "mid360")
+    source.seek(0)
+    raw = list(make_reader(source).iter_messages())
+    with open(path, "wb") as f, LogWriter(f) as writer:
+        for i, (schema, channel, message) in enumerate(raw):
+            data = b"\x0a\x02\x08\xff" if i == bad_index else message.data  # truncated stamp
+            writer.write_raw(schema, channel, message.log_time, message.publish_time, data)
+    return raw[bad_index][2].log_time
+
+
+def test_corrupt_cloud_message_names_log_topic_and_stamp(tmp_path: Path) -> None:
+    from cldet.errors import CorruptMessageError
+    from cldet.stamps import format_stamp
+
+    path = tmp_path / "badcloud.mcap"
+    stamp = write_log_with_a_corrupt_cloud(path)
+    with pytest.raises(CorruptMessageError) as caught:
+        list(iter_clouds(path, tp.LIDAR_360))
+    err = caught.value
+    assert err.topic == tp.LIDAR_360 and err.stamp_ns == stamp and err.log == path
+    text = str(err)
+    assert str(path) in text and tp.LIDAR_360 in text and format_stamp(stamp) in text
+    assert "Wire format was corrupt" in text and "\n" not in text
+    with pytest.raises(CorruptMessageError, match=r"badcloud\.mcap: corrupt message on /lidar_360"):
+        list(iter_cloud_fields(path, tp.LIDAR_360))
+    import pickle  # crosses worker processes intact
+
+    again = pickle.loads(pickle.dumps(err))
+    assert str(again) == text and again.stamp_ns == stamp
+
+
+def test_a_bug_is_not_reported_as_a_corrupt_log(
+    sample_log: tuple[Path, dict], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Only what corrupt bytes raise becomes a LogError; a TypeError (a bug) goes through."""
+    from cldet.io import mcap_read
+
+    def broken(data: bytes) -> np.ndarray:
+        raise TypeError("a bug")
+
+    monkeypatch.setattr(mcap_read, "_xyz_view", broken)
+    with pytest.raises(TypeError, match="a bug"):
+        list(iter_clouds(sample_log[0], tp.LIDAR_360))
+
+
 # --- atomic output ---------------------------------------------------------------------------
 def test_atomic_output_replaces_only_when_complete(tmp_path: Path) -> None:
     target = tmp_path / "seq0001.mcap"

@@ -31,13 +31,27 @@ def echo_err(message: str) -> None:
     typer.echo(message, err=True)
 
 
+def describe_os_error(err: OSError) -> str:
+    """One line for an ``OSError``: the file(s) it names and the system's reason."""
+    reason = err.strerror or str(err) or type(err).__name__
+    names = [str(n) for n in (err.filename, err.filename2) if n is not None]
+    return f"{' -> '.join(names)}: {reason}" if names else reason
+
+
 @contextmanager
 def handled() -> Iterator[None]:
-    """Map cldet's own errors to ``ERROR: ...`` and exit code 1; Ctrl-C to exit code 130."""
+    """Map cldet's own errors to ``ERROR: ...`` and exit code 1; Ctrl-C to exit code 130.
+
+    An ``OSError`` that reaches here (a disk that fills up, a file that vanished) is an
+    environment failure, not a bug: it also becomes one line naming the file, and exit code 1.
+    """
     try:
         yield
     except CldetError as err:
         echo_err(f"ERROR: {err}")
+        raise typer.Exit(1) from err
+    except OSError as err:
+        echo_err(f"ERROR: {describe_os_error(err)}")
         raise typer.Exit(1) from err
     except KeyboardInterrupt as err:
         echo_err("interrupted")

@@ -26,17 +26,20 @@ import zstandard
 from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
 from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+from google.protobuf.message import DecodeError
+from mcap.exceptions import McapError
 from mcap.reader import SeekingReader, make_reader
 from mcap.records import Attachment, Channel, ChunkIndex, Header, Message, Schema
 from mcap.stream_reader import StreamReader
 from mcap.summary import Summary
 from numpy.typing import NDArray
 
-from cldet.errors import LogError
+from cldet.errors import CorruptMessageError, LogError
 from cldet.io import topics
 from cldet.io.mcap_append import AppendPlan, copy_prefix, plan_append
 from cldet.io.schemas import ClassLabel
 from cldet.io.schemas import Estimate as EstimateMessage
+from cldet.stamps import format_stamp
 from cldet.types import ClassSample, Cloud, Estimate, PositionSample, Source
 
 __all__ = [
@@ -53,6 +56,30 @@ __all__ = [
 ]
 
 _DATA_FIELD = 6  # foxglove.PointCloud.data
+
+# What corrupt bytes raise in the mcap library, protobuf, the decompressors and this module's
+# own parsers (lz4.frame raises RuntimeError on a bad frame). Anything else is a bug: not caught.
+_CORRUPT: tuple[type[BaseException], ...] = (
+    McapError,
+    DecodeError,
+    ValueError,  # also UnicodeDecodeError, mcap's CRCValidationError
+    IndexError,
+    KeyError,
+    struct.error,
+    EOFError,
+    zstandard.ZstdError,
+    RuntimeError,
+)
+
+# ... and a seek before the start of a short file, a read that fails.
+_UNREADABLE: tuple[type[BaseException], ...] = (*_CORRUPT, OSError)
+
+
+def _reason(err: BaseException) -> str:
+    """The error's text, or its type's name when it has none (never an empty reason)."""
+    return str(err).strip() or type(err).__name__
+
+
 _FLOAT32 = PackedElementField.FLOAT32
 
 
@@ -227,10 +254,10 @@ class LogReader:
         try:
             reader = make_reader(self._file, validate_crcs=True)  # catches corrupt chunks
             summary = reader.get_summary()
-        except Exception as err:
+        except _UNREADABLE as err:
             self._file.close()
             raise LogError(
-                f"{self.path} is not a readable MCAP log (truncated or corrupt?): {err}"
+                f"{self.path} is not a readable MCAP log (truncated or corrupt): {_reason(err)}"
             ) from err
         if summary is None or not isinstance(reader, SeekingReader):
             self._file.close()
@@ -293,8 +320,10 @@ class LogReader:
         """The log's header record (profile and writing library)."""
         try:
             return self._reader.get_header()
-        except Exception as err:
-            raise LogError(f"cannot read the header of {self.path} (corrupt?): {err}") from err
+        except _UNREADABLE as err:
+            raise LogError(
+                f"cannot read the header of {self.path} (corrupt): {_reason(err)}"
+            ) from err
 
     def chunk_compression(self) -> str:
         """The compression of the log's first chunk ("zstd", "lz4" or "" for none)."""
@@ -305,15 +334,19 @@ class LogReader:
         """Every metadata record in file order, as (name, key/value strings)."""
         try:
             return [(m.name, dict(m.metadata)) for m in self._reader.iter_metadata()]
-        except Exception as err:
-            raise LogError(f"cannot read metadata of {self.path} (corrupt?): {err}") from err
+        except _UNREADABLE as err:
+            raise LogError(
+                f"cannot read metadata of {self.path} (corrupt): {_reason(err)}"
+            ) from err
 
     def attachments(self) -> Iterator[Attachment]:
         """Every attachment record of the log."""
         try:
             yield from self._reader.iter_attachments()
-        except Exception as err:
-            raise LogError(f"cannot read attachments of {self.path} (corrupt?): {err}") from err
+        except _UNREADABLE as err:
+            raise LogError(
+                f"cannot read attachments of {self.path} (corrupt): {_reason(err)}"
+            ) from err
 
     def _missing(self, topic: str) -> LogError:
         existing = self.list_topics()
@@ -339,8 +372,10 @@ class LogReader:
                 yield from StreamReader(f, validate_crcs=True).records
         except OSError as err:
             raise LogError(f"cannot read {self.path}: {err.strerror or err}") from err
-        except Exception as err:
-            raise LogError(f"cannot read {self.path} record by record (corrupt?): {err}") from err
+        except _CORRUPT as err:
+            raise LogError(
+                f"cannot read {self.path} record by record (corrupt): {_reason(err)}"
+            ) from err
 
     # --- continuing the log (cldet.io.mcap_append) ---------------------------------------------
     def plan_append(
@@ -394,11 +429,13 @@ class LogReader:
                     *(self._iter_chunks(run, ids, start_ns, end_ns) for run in runs),
                     key=lambda item: item[2].log_time,
                 )
-        except LogError:
-            raise
-        except Exception as err:
+        except OSError as err:
+            raise LogError(f"cannot read {self.path}: {err.strerror or err}") from err
+        except _CORRUPT as err:
             what = f"topics {', '.join(wanted)}" if wanted else "messages"
-            raise LogError(f"cannot read {what} from {self.path} (corrupt?): {err}") from err
+            raise LogError(
+                f"cannot read {what} from {self.path} (corrupt): {_reason(err)}"
+            ) from err
 
     def _wanted_ids(self, wanted: list[str] | None) -> set[int] | None:
         if wanted is None:
@@ -492,7 +529,7 @@ class LogReader:
         for message, _ in self._decoded(topic, (topics.SCHEMA_POINT_CLOUD,), start_ns, end_ns):
             try:
                 points = _xyz_view(message.data)
-            except (ValueError, IndexError) as err:
+            except _CORRUPT as err:
                 raise self._bad(topic, message, err) from err
             yield Cloud(stamp_ns=message.log_time, points=points)
 
@@ -503,7 +540,7 @@ class LogReader:
         for message, _ in self._decoded(topic, (topics.SCHEMA_POINT_CLOUD,), start_ns, end_ns):
             try:
                 _, columns = decode_cloud(message.data)
-            except (ValueError, IndexError) as err:
+            except _CORRUPT as err:
                 raise self._bad(topic, message, err) from err
             yield message.log_time, columns
 
@@ -520,7 +557,7 @@ class LogReader:
                 else:
                     p = PoseInFrame.FromString(message.data).pose.position
                     xyz = (p.x, p.y, p.z)
-            except Exception as err:
+            except _CORRUPT as err:
                 raise self._bad(topic, message, err) from err
             yield PositionSample(stamp_ns=message.log_time, position=np.array(xyz, np.float64))
 
@@ -531,7 +568,7 @@ class LogReader:
         for message, _ in self._decoded(topic, (topics.SCHEMA_CLASS_LABEL,), start_ns, end_ns):
             try:
                 label = ClassLabel.FromString(message.data)
-            except Exception as err:
+            except _CORRUPT as err:
                 raise self._bad(topic, message, err) from err
             yield ClassSample(stamp_ns=message.log_time, class_id=int(label.class_id))
 
@@ -547,7 +584,7 @@ class LogReader:
             try:
                 est = EstimateMessage.FromString(message.data)
                 source = Source(est.source)
-            except Exception as err:
+            except _CORRUPT as err:
                 raise self._bad(topic, message, err) from err
             yield (
                 Estimate(
@@ -560,9 +597,14 @@ class LogReader:
                 int(est.track_id),
             )
 
-    def _bad(self, topic: str, message: Message, err: Exception) -> LogError:
-        return LogError(
-            f"{self.path}: cannot decode the message on {topic} at {message.log_time} ns: {err}"
+    def _bad(self, topic: str, message: Message, err: BaseException) -> CorruptMessageError:
+        stamp = message.log_time
+        return CorruptMessageError(
+            f"{self.path}: corrupt message on {topic} stamped {format_stamp(max(stamp, 0))} "
+            f"({stamp} ns): {_reason(err)}",
+            log=self.path,
+            topic=topic,
+            stamp_ns=stamp,
         )
 
 
