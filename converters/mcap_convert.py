@@ -377,8 +377,9 @@ def convert_dataset(
         progress: told the total number of frames, then advanced per frame.
 
     Returns:
-        A :class:`ConvertReport`; a sequence that fails (e.g. a corrupt ``.npy``) is listed in
-        ``failed`` with a message naming the file, and the others are still converted.
+        A :class:`ConvertReport`; a sequence that fails (a corrupt ``.npy``, a file that is not a
+        regular file, an empty sequence folder, two folders naming one sequence) is listed in
+        ``failed`` with a message naming the file or folder, and the others are still converted.
 
     Raises:
         DatasetError: the root, a split or a requested sequence is missing.
@@ -392,9 +393,11 @@ def convert_dataset(
     except ValueError as err:
         choices = ", ".join(c.value for c in Compression)
         raise LogError(f"unknown compression {compression!r}: expected one of {choices}") from err
-    found = mmaud.find_sequences(Path(root), splits=splits, sequences=sequences)
+    found, problems = mmaud.scan_sequences(Path(root), splits=splits, sequences=sequences)
     out = Path(out)
     tally = _Tally()
+    for problem in problems:  # an empty folder, two folders for one sequence: the others go on
+        tally.failed.append(ConvertFailure(f"{problem.split}/{problem.name}", problem.message))
     jobs: list[_Job] = []
     total = 0
     for seq in found:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import heapq
 import os
 import re
+import stat
 import warnings
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -34,6 +35,7 @@ __all__ = [
     "PNG_SIGNATURE",
     "SPLITS",
     "Item",
+    "SequenceProblem",
     "SequenceRef",
     "canonical_sequence_name",
     "count_frames",
@@ -46,6 +48,7 @@ __all__ = [
     "iter_sequence",
     "list_stamped_files",
     "load_cloud",
+    "scan_sequences",
 ]
 
 SPLITS = ("train", "val", "test")
@@ -130,6 +133,30 @@ def _has_visible_entry(folder: Path) -> bool:
         raise DatasetError(f"cannot list folder {folder}: {err}") from err
 
 
+def _is_regular_file(entry: os.DirEntry[str]) -> bool:
+    try:
+        return entry.is_file()  # follows a symbolic link to its target
+    except OSError:
+        return False
+
+
+def _kind(path: Path) -> str:
+    """What a non-regular directory entry is, in words (for messages)."""
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        return "a broken symbolic link" if path.is_symlink() else "unreadable"
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO (named pipe)"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    return "not a file"
+
+
 def _suffix(modality: str) -> str:
     return ".png" if modality == "Image" else ".npy"
 
@@ -142,7 +169,9 @@ def find_sequences(
     """Find the sequence folders of a challenge dataset root, sorted by split then name.
 
     Only folder names are read. Top-level folders other than ``train``/``val``/``test`` are ignored
-    with a warning, as are folders in a split that are not named ``seq<digits>``.
+    with a warning, as are folders in a split that are not named ``seq<digits>`` and folders in a
+    sequence that are not modalities. :func:`scan_sequences` is the lenient form: it reports an
+    unusable sequence folder instead of raising.
 
     Args:
         root: the dataset root, holding ``train/``, ``val/`` and/or ``test/``.
@@ -157,6 +186,39 @@ def find_sequences(
         DatasetError: the root is missing or not a folder; a split is unknown or missing; no
             sequence is found; a requested sequence is not found; two folders name the same
             sequence; a sequence has no modality folder, or only empty ones ("empty sequence").
+    """
+    found, problems = scan_sequences(root, splits=splits, sequences=sequences)
+    if problems:
+        raise DatasetError(problems[0].message)
+    return found
+
+
+@dataclass(frozen=True)
+class SequenceProblem:
+    """A sequence folder that cannot be converted; the others still can."""
+
+    split: str
+    name: str  # canonical "seq0001"
+    message: str  # names the folder(s) at fault
+
+
+def scan_sequences(
+    root: Path,
+    splits: Sequence[str] | None = None,
+    sequences: Sequence[str] | None = None,
+) -> tuple[list[SequenceRef], list[SequenceProblem]]:
+    """Find the sequence folders like :func:`find_sequences`, reporting unusable ones apart.
+
+    An empty sequence (no modality folder, or only empty ones) and two folders naming one
+    sequence (``seq2`` beside ``seq0002``) are returned as problems, so that one bad folder does
+    not stop a whole dataset.
+
+    Returns:
+        (usable sequences sorted by split then name, problems in the same order).
+
+    Raises:
+        DatasetError: the root is missing or not a folder; a split is unknown or missing; no
+            sequence folder is found; a requested sequence is not found.
     """
     root = Path(root)
     if not root.exists():
@@ -194,10 +256,10 @@ def find_sequences(
             if split not in wanted_splits:
                 wanted_splits.append(split)
 
-    found: list[tuple[str, str, Path]] = []  # (split, canonical name, folder)
+    folders: list[tuple[str, str, list[Path]]] = []  # (split, canonical name, its folders)
     for split in wanted_splits:
         split_dir = root / split
-        by_name: dict[str, Path] = {}
+        by_name: dict[str, list[Path]] = {}
         others: list[str] = []
         for entry in _visible_entries(split_dir):
             if not entry.is_dir():
@@ -206,41 +268,59 @@ def find_sequences(
             if canonical is None:
                 others.append(entry.name)
                 continue
-            if canonical in by_name:
-                raise DatasetError(
-                    f"two folders in {split_dir} name sequence {canonical}: "
-                    f"{by_name[canonical].name} and {entry.name}"
-                )
-            by_name[canonical] = Path(entry.path)
+            by_name.setdefault(canonical, []).append(Path(entry.path))
         if others:
             warnings.warn(
                 f"ignoring folders in {split_dir} that are not sequences (seqNNNN): {_listing(others)}",
                 stacklevel=2,
             )
-        found.extend((split, name, path) for name, path in by_name.items())
+        folders.extend((split, name, paths) for name, paths in by_name.items())
 
     where = f"{root} (split{'s' if len(wanted_splits) > 1 else ''} {', '.join(wanted_splits)})"
     if sequences is not None:
         wanted_names = {canonical_sequence_name(s) for s in _as_tuple(sequences)}
-        existing = sorted({name for _, name, _ in found}, key=_sequence_number)
+        existing = sorted({name for _, name, _ in folders}, key=_sequence_number)
         missing = sorted(wanted_names.difference(existing), key=_sequence_number)
         if missing:
             raise DatasetError(
                 f"sequence{'s' if len(missing) > 1 else ''} {', '.join(missing)} not found in {where}; "
                 f"sequences present: {_listing(existing)}"
             )
-        found = [item for item in found if item[1] in wanted_names]
-    if not found:
+        folders = [item for item in folders if item[1] in wanted_names]
+    if not folders:
         raise DatasetError(f"no sequence found in {where}: expected folders named seqNNNN")
 
-    found.sort(key=lambda item: (SPLITS.index(item[0]), _sequence_number(item[1])))
-    return [
-        SequenceRef(split=split, name=name, path=path, modalities=_present_modalities(path))
-        for split, name, path in found
-    ]
+    folders.sort(key=lambda item: (SPLITS.index(item[0]), _sequence_number(item[1])))
+    found: list[SequenceRef] = []
+    problems: list[SequenceProblem] = []
+    for split, name, paths in folders:
+        if len(paths) > 1:
+            names = " and ".join(p.name for p in paths)
+            message = f"two folders in {root / split} name sequence {name}: {names}"
+            problems.append(SequenceProblem(split, name, message))
+            continue
+        try:
+            modalities = _present_modalities(paths[0])
+        except DatasetError as err:
+            problems.append(SequenceProblem(split, name, str(err)))
+            continue
+        found.append(SequenceRef(split=split, name=name, path=paths[0], modalities=modalities))
+    return found, problems
 
 
 def _present_modalities(path: Path) -> tuple[str, ...]:
+    entries = _visible_entries(path)
+    others = [e.name for e in entries if e.is_dir() and e.name not in MODALITIES]
+    if others:
+        hints = []
+        for name in others:
+            close = [m for m in MODALITIES if m.casefold() == name.casefold()]
+            hints.append(f"{name} (did you mean {close[0]}?)" if close else name)
+        warnings.warn(
+            f"ignoring folders in {path} that are not modalities ({', '.join(MODALITIES)}): "
+            f"{_listing(hints)}",
+            stacklevel=3,
+        )
     modalities = tuple(m for m in MODALITIES if (path / m).is_dir())
     if not modalities:
         raise DatasetError(
@@ -276,6 +356,10 @@ def list_stamped_files(folder: Path, suffix: str = ".npy") -> list[tuple[int, Pa
     for entry in _visible_entries(folder):
         name = entry.name
         path = Path(entry.path)
+        if not _is_regular_file(entry):
+            raise DatasetError(
+                f"{path} is {_kind(path)}, not a regular file: expected a <stamp>{suffix} file"
+            )
         if not name.endswith(suffix) or len(name) == len(suffix):
             raise DatasetError(
                 f"unexpected file {path}: expected a <stamp>{suffix} file, like 1706255621.600227{suffix}"

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import io
+import os
+import re
 import shutil
 import subprocess
 import tracemalloc
@@ -377,6 +379,87 @@ def test_progress_ledger_settles_counts_still_in_transit() -> None:
     ledger.settle(1, 10)
     ledger.settle(2, 5)  # a job whose messages never arrived at all
     assert progress.done == 115
+
+
+@pytest.mark.parametrize("case", ["no-modality", "empty-modalities", "seq2-beside-seq0002"])
+@pytest.mark.parametrize("workers", [1, 2])
+def test_one_unusable_sequence_folder_does_not_stop_the_dataset(
+    tiny: Path, tmp_path: Path, case: str, workers: int
+) -> None:
+    bad = tiny / "train" / "seq0003"
+    if case == "no-modality":
+        bad.mkdir()
+        expected = r"empty sequence .*seq0003: no modality folder"
+    elif case == "empty-modalities":
+        (bad / "lidar_360").mkdir(parents=True)
+        (bad / "Image").mkdir()
+        expected = (
+            r"empty sequence .*seq0003: its modality folders \(lidar_360, Image\) are all empty"
+        )
+    else:
+        shutil.copytree(tiny / "train" / "seq0002", tiny / "train" / "seq2")
+        bad = tiny / "train" / "seq2"
+        expected = r"two folders in .*train name sequence seq0002: seq0002 and seq2"
+    out = tmp_path / "logs"
+    report = convert_dataset(tiny, out, workers=workers)
+    assert not report.ok and len(report.failed) == 1
+    (failure,) = report.failed
+    assert failure.sequence == ("train/seq0002" if "seq2" in case else "train/seq0003")
+    assert re.search(expected, failure.message), failure.message
+    good = [out / "train/seq0001.mcap", out / "val/seq0001.mcap"]
+    if "seq2" not in case:
+        good.insert(1, out / "train/seq0002.mcap")
+    assert list(report.converted) == good
+    assert leftovers(out) == []
+
+
+def test_cli_reports_an_empty_sequence_and_exits_1(
+    cli: Callable[..., object], tiny: Path, tmp_path: Path
+) -> None:
+    (tiny / "val" / "seq0002").mkdir()
+    result = cli("convert", tiny, "-o", tmp_path / "logs", "--workers", 1)
+    assert result.exit_code == 1  # type: ignore[attr-defined]
+    output = result.output  # type: ignore[attr-defined]
+    assert "val/seq0002: empty sequence" in output and "converted 3 sequence(s)" in output
+    assert "ERROR: 1 sequence(s) failed to convert" in output and "Traceback" not in output
+
+
+def test_unknown_folder_in_a_sequence_is_warned_about(
+    cli: Callable[..., object], tiny: Path, tmp_path: Path
+) -> None:
+    seq = tiny / "val" / "seq0001"
+    (seq / "lidar_360").rename(seq / "Lidar_360")
+    with pytest.warns(
+        UserWarning, match=r"not modalities .*: Lidar_360 \(did you mean lidar_360\?\)"
+    ):
+        mmaud.find_sequences(tiny, splits=["val"])
+    result = cli("convert", tiny, "-o", tmp_path / "logs", "--split", "val", "--workers", 1)
+    assert result.exit_code == 0  # type: ignore[attr-defined]
+    assert (
+        "warning: ignoring folders in" in result.output  # type: ignore[attr-defined]
+        and "Lidar_360 (did you mean lidar_360?)" in result.output  # type: ignore[attr-defined]
+    )
+
+
+@pytest.mark.parametrize("kind", ["fifo", "folder", "broken-link"])
+def test_a_frame_that_is_not_a_regular_file_is_named(tiny: Path, tmp_path: Path, kind: str) -> None:
+    folder = tiny / "train" / "seq0002" / "lidar_360"
+    odd = folder / "1706255630.000000.npy"
+    if kind == "fifo":
+        os.mkfifo(odd)
+        shown = "a FIFO (named pipe)"
+    elif kind == "folder":
+        odd.mkdir()
+        shown = "a folder"
+    else:
+        odd.symlink_to(tmp_path / "nowhere.npy")
+        shown = "a broken symbolic link"
+    out = tmp_path / "logs"
+    report = convert_dataset(tiny, out, workers=1)  # would block forever on np.load of a FIFO
+    (failure,) = report.failed
+    assert failure.sequence == "train/seq0002"
+    assert failure.message == (f"{odd} is {shown}, not a regular file: expected a <stamp>.npy file")
+    assert len(report.converted) == 2 and leftovers(out) == []
 
 
 def test_existing_output_is_skipped_unless_overwrite(tiny: Path, tmp_path: Path) -> None:
