@@ -4,13 +4,15 @@ Each log names its sequence in its ``cldet.source`` metadata and carries the est
 trajectory on ``/cldet/estimate`` (``cldet.Estimate``). For every query row the sequence's
 trajectory is evaluated at the row's stamp by
 :func:`cldet.core.trajectory.evaluate_trajectory`: linear interpolation between estimates, the
-track's own constant-velocity motion before the first and after the last one.
+track's own constant-velocity motion before the first and after the last one, for at most
+:data:`DEFAULT_MAX_EXTRAPOLATION_NS` (then held), unless told otherwise.
 
 Rules, all reported in the returned :class:`ExportReport`:
 
 - Estimates whose source is ``FALLBACK`` (a fallback rule, not the track) are ignored when the
   log also has estimates from the track; the track's motion then bridges those stretches.
-- A query sequence with no log, or whose log has no usable estimate, gets the global constant
+- A query sequence with no log, or whose log was never annotated (or has no usable estimate),
+  is an error; with ``allow_fallback`` (``--allow-fallback``) it gets the global constant
   :data:`FALLBACK_POSITION_M` (the training-set mean position) on every row, and a warning.
 - ``Classification`` is the constant :data:`DEFAULT_CLASS_ID` (no classifier yet) unless a
   class id is given.
@@ -48,6 +50,10 @@ FALLBACK_POSITION_M: Final[tuple[float, float, float]] = (0.734, -9.739, 33.353)
 """Position (metres, Mid-360 frame) for a sequence without any estimate: the training-set mean."""
 DEFAULT_CLASS_ID: Final = 0
 """Classification written for every row until a classifier exists."""
+DEFAULT_MAX_EXTRAPOLATION_NS: Final = 1_000_000_000
+"""How far beyond its first or last estimate a track's motion is followed by default (1 s); a
+query further out gets the position reached there. A drone at 10 m/s is 10 m away after 1 s:
+following a straight line for longer is a guess, not an estimate."""
 
 
 @dataclass(frozen=True)
@@ -60,6 +66,7 @@ class LogTrack:
     stamps_ns: NDArray[np.int64]  # (K,) ascending; K = 0 when the log has no usable estimate
     positions: NDArray[np.float64]  # (K, 3) metres, Mid-360 frame
     n_fallback_dropped: int  # FALLBACK estimates ignored because the track has its own
+    annotated: bool = True  # the log has a /cldet/estimate channel (was annotated)
 
 
 @dataclass(frozen=True)
@@ -111,6 +118,7 @@ def read_log_track(path: Path | str) -> LogTrack:
         stamps: list[int] = []
         positions: list[NDArray[np.float64]] = []
         fallback: list[bool] = []
+        annotated = topics.ESTIMATE in log.list_topics()
         if log.list_topics().get(topics.ESTIMATE, 0) > 0:
             for estimate, _track_id in log.iter_estimates(topics.ESTIMATE):
                 if np.all(np.isfinite(estimate.position)):
@@ -125,7 +133,7 @@ def read_log_track(path: Path | str) -> LogTrack:
         n_dropped = int(is_fallback.sum())
         stamps_ns, pos = stamps_ns[~is_fallback], pos[~is_fallback]
     order = np.argsort(stamps_ns, kind="stable")
-    return LogTrack(Path(path), sequence, split, stamps_ns[order], pos[order], n_dropped)
+    return LogTrack(Path(path), sequence, split, stamps_ns[order], pos[order], n_dropped, annotated)
 
 
 def read_log_truth(path: Path | str) -> list[TruthRow]:
@@ -170,7 +178,8 @@ def export_results(
     class_id: int = DEFAULT_CLASS_ID,
     *,
     overwrite: bool = False,
-    max_extrapolation_ns: int | None = None,
+    max_extrapolation_ns: int | None = DEFAULT_MAX_EXTRAPOLATION_NS,
+    allow_fallback: bool = False,
     progress: Progress | None = None,
 ) -> ExportReport:
     """Write a submission CSV from annotated logs, one row per query row, atomically.
@@ -185,7 +194,9 @@ def export_results(
         overwrite: replace an existing ``out``.
         max_extrapolation_ns: follow the track's motion at most this far beyond its first or
             last estimate, then hold (see :func:`~cldet.core.trajectory.evaluate_trajectory`);
-            ``None``: no limit.
+            default :data:`DEFAULT_MAX_EXTRAPOLATION_NS`, ``None``: no limit.
+        allow_fallback: write :data:`FALLBACK_POSITION_M` for a sequence without a log or
+            without estimates (with a warning) instead of raising.
         progress: told about each log read (``None``: silent).
 
     Returns:
@@ -193,7 +204,8 @@ def export_results(
 
     Raises:
         LogError: a log cannot be read or has no sequence name.
-        ResultsError: a malformed query file, two logs of the same sequence, or no row at all.
+        ResultsError: a malformed query file, two logs of the same sequence, no row at all, or
+            (without ``allow_fallback``) a query sequence without a log or without estimates.
         OutputExistsError: ``out`` exists and ``overwrite`` is false.
     """
     out_path = Path(out)
@@ -201,9 +213,12 @@ def export_results(
         raise OutputExistsError(
             f"{out_path} already exists: pass overwrite (--overwrite) to replace it"
         )
-    queries: Sequence[QueryRow] | None = (
-        read_timestamps(timestamps) if timestamps is not None else None
-    )
+    queries: Sequence[QueryRow] | None = None
+    if timestamps is not None:
+        try:
+            queries = read_timestamps(timestamps)
+        except ResultsError as err:
+            raise ResultsError(f"the query file (--timestamps) is not usable: {err}") from err
     tracks: dict[str, LogTrack] = {}
     warnings: list[str] = []
     paths = [Path(p) for p in logs]
@@ -228,7 +243,12 @@ def export_results(
     if queries is None:
         queries = _truth_queries(tracks.values(), warnings)
     if not queries:
-        raise ResultsError("nothing to export: no query rows (and no ground truth in the logs)")
+        where = (
+            f"the query file {timestamps} (--timestamps) has no row"
+            if timestamps is not None
+            else "no query file (--timestamps) was given and no log has ground truth to use instead"
+        )
+        raise ResultsError(f"nothing to export: {where}")
 
     by_sequence: dict[str, list[int]] = {}
     for i, query in enumerate(queries):
@@ -237,6 +257,19 @@ def export_results(
     positions = np.empty((len(queries), 3), dtype=np.float64)
     n_inside = n_outside = n_fallback = 0
     fallback_sequences: list[str] = []
+    missing = [
+        (queries[indices[0]].sequence, len(indices), tracks.get(key))
+        for key, indices in by_sequence.items()
+        if tracks.get(key) is None or tracks[key].stamps_ns.size == 0
+    ]
+    if missing and not allow_fallback:
+        shown = "; ".join(_why_no_estimate(name, n, track) for name, n, track in missing[:5])
+        more = f"; and {len(missing) - 5} more" if len(missing) > 5 else ""
+        raise ResultsError(
+            f"no estimate for {len(missing)} query sequence(s): {shown}{more}; annotate their "
+            "logs (`cldet annotate`), or pass allow_fallback (--allow-fallback) to write the "
+            f"training-set mean position {list(FALLBACK_POSITION_M)} for them"
+        )
     for key, indices in by_sequence.items():
         query_ns = np.array([queries[i].stamp_ns for i in indices], dtype=np.int64)
         track = tracks.get(key)
@@ -283,6 +316,14 @@ def export_results(
         unused_logs=unused,
         warnings=tuple(warnings),
     )
+
+
+def _why_no_estimate(name: str, n_rows: int, track: LogTrack | None) -> str:
+    if track is None:
+        return f"{name} ({n_rows} rows) has no log among those given"
+    if not track.annotated:
+        return f"{name} ({n_rows} rows): {track.path} was never annotated (no {topics.ESTIMATE})"
+    return f"{name} ({n_rows} rows): {track.path} has no usable estimate"
 
 
 def _truth_queries(tracks: Iterable[LogTrack], warnings: list[str]) -> Sequence[QueryRow]:

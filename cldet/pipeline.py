@@ -120,10 +120,11 @@ def annotate_log(
     with open_log(log) as reader:
         found = reader.list_topics()
         source_meta = reader.metadata().get(topics.METADATA_SOURCE, {})
-    if topics.LIDAR_360 not in found:
+    if not found.get(topics.LIDAR_360):  # absent, or a channel without a message
+        what = "no message on its" if topics.LIDAR_360 in found else "no"
         raise LogError(
-            f"{log}: no {topics.LIDAR_360} channel to annotate; topics in the log: "
-            + (", ".join(sorted(found)) or "none")
+            f"{log}: {what} {topics.LIDAR_360} channel, nothing to annotate; topics in the log: "
+            + (", ".join(f"{t} ({n})" for t, n in sorted(found.items())) or "none")
         )
     n_frames = found[topics.LIDAR_360]
     has_avia = found.get(topics.LIVOX_AVIA, 0) > 0

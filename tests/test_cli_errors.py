@@ -144,3 +144,27 @@ def test_annotate_a_corrupt_cloud_names_log_topic_and_stamp(
     assert_one_error(result, f"{path}: corrupt message on /lidar_360 stamped {format_stamp(stamp)}")
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.mcap"]
+
+
+def test_annotate_a_lidar_channel_without_messages(
+    cli: Callable[..., Result], tmp_path: Path
+) -> None:
+    from mcap.writer import Writer
+
+    source = tmp_path / "one.mcap"
+    write_clouds(source, n=1)
+    with open(source, "rb") as f:
+        ((schema, channel, _),) = list(make_reader(f).iter_messages())
+    path = tmp_path / "empty-lidar.mcap"
+    with open(path, "wb") as f:
+        writer = Writer(f)
+        writer.start()
+        schema_id = writer.register_schema(schema.name, schema.encoding, schema.data)
+        writer.register_channel(channel.topic, channel.message_encoding, schema_id)
+        writer.finish()
+    result = cli("annotate", path, "--no-rrd")
+    assert_one_error(
+        result,
+        f"{path}: no message on its /lidar_360 channel, nothing to annotate; "
+        "topics in the log: /lidar_360 (0)",
+    )

@@ -85,7 +85,7 @@ def test_export_rows_match_the_query_file(tmp_path: Path, logs: list[Path]) -> N
     query.write_text(QUERY)
     out = tmp_path / "mmaud_results.csv"
 
-    report = export_results(logs, out, query)
+    report = export_results(logs, out, query, allow_fallback=True, max_extrapolation_ns=None)
 
     rows = read_results(out)
     assert [(r.sequence, r.timestamp) for r in rows] == [
@@ -139,7 +139,7 @@ def test_export_without_timestamps_uses_ground_truth_stamps(
     tmp_path: Path, logs: list[Path]
 ) -> None:
     out = tmp_path / "r.csv"
-    report = export_results(logs, out)
+    report = export_results(logs, out, allow_fallback=True)
     rows = read_results(out)
     assert len(rows) == 41 + 1
     assert rows[0].timestamp == "1713163001.000000"
@@ -206,6 +206,10 @@ def test_cli_export(tmp_path: Path, logs: list[Path]) -> None:
     out = tmp_path / "mmaud_results.csv"
     runner = CliRunner()
     args = ["export", *map(str, logs), "-t", str(query), "-o", str(out), "--class-id", "2"]
+    refused = runner.invoke(app, args)
+    assert refused.exit_code == 1 and not out.exists()
+    assert "ERROR: no estimate for 2 query sequence(s)" in refused.stderr
+    args.append("--allow-fallback")
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     assert "7 rows in 3 sequences" in result.stdout
@@ -224,12 +228,13 @@ def test_cli_export_bad_query(tmp_path: Path, logs: list[Path]) -> None:
     query.write_text("Sequence,Timestamp\nseq1,noon\n")
     result = CliRunner().invoke(app, ["export", str(logs[0]), "-t", str(query), "-o", "x.csv"])
     assert result.exit_code == 1
-    assert "ERROR:" in result.stderr and "q.csv:2: bad Timestamp 'noon'" in result.stderr
+    assert "ERROR: the query file (--timestamps) is not usable:" in result.stderr
+    assert "q.csv:2: bad Timestamp 'noon'" in result.stderr
 
 
 def test_every_row_at_the_fallback_is_flagged(tmp_path: Path) -> None:
     log = make_log(tmp_path / "raw.mcap", "seq0001", truth=[(T0, np.zeros(3))])
-    report = export_results([log], tmp_path / "r.csv")
+    report = export_results([log], tmp_path / "r.csv", allow_fallback=True)
     assert report.n_fallback_rows == report.n_rows == 1
     assert any("were the logs annotated" in w for w in report.warnings)
 
@@ -243,3 +248,46 @@ def test_cli_max_extrapolation(tmp_path: Path, logs: list[Path]) -> None:
     assert result.exit_code == 0, result.output
     held = line([T0 + 3_500_000_000])[0]  # 0.5 s past the last estimate (T0 + 3 s), then held
     np.testing.assert_allclose(read_results(out)[0].position, held, atol=1e-6)
+
+
+def test_a_log_never_annotated_or_missing_is_an_error(tmp_path: Path, logs: list[Path]) -> None:
+    query = tmp_path / "q.csv"
+    query.write_text(QUERY)
+    out = tmp_path / "r.csv"
+    with pytest.raises(
+        ResultsError,
+        match=(
+            r"no estimate for 2 query sequence\(s\): seq0002 \(2 rows\): .*seq0002\.mcap was "
+            r"never annotated \(no /cldet/estimate\); seq0003 \(1 rows\) has no log among those "
+            r"given; annotate their logs \(`cldet annotate`\), or pass allow_fallback "
+            r"\(--allow-fallback\)"
+        ),
+    ):
+        export_results(logs, out, query)
+    assert not out.exists()
+
+
+def test_extrapolation_is_capped_by_default(tmp_path: Path, logs: list[Path]) -> None:
+    query = tmp_path / "q.csv"
+    query.write_text("Sequence,Timestamp,Position,Classification\nseq0001,1713163073.000000,,\n")
+    export_results(logs[:1], tmp_path / "r.csv", query)  # 70 s after the last estimate
+    held = line([T0 + 4_000_000_000])[0]  # 1 s past the last estimate (T0 + 3 s), then held
+    np.testing.assert_allclose(read_results(tmp_path / "r.csv")[0].position, held, atol=1e-6)
+    result = CliRunner().invoke(
+        app,
+        ["export", str(logs[0]), "-t", str(query), "-o", str(tmp_path / "u.csv")]
+        + ["--max-extrapolation-s", "inf"],
+    )
+    assert result.exit_code == 0, result.output
+    far = line([T0 + 73_000_000_000])[0]  # no limit: the line followed for 70 s
+    np.testing.assert_allclose(read_results(tmp_path / "u.csv")[0].position, far, atol=1e-5)
+
+
+def test_nothing_to_export_names_the_timestamps_option(tmp_path: Path) -> None:
+    log = make_log(tmp_path / "e.mcap", "seq0009", estimates=line_estimates(0.0, 1.0))
+    with pytest.raises(ResultsError, match=r"no query file \(--timestamps\) was given"):
+        export_results([log], tmp_path / "r.csv")
+    empty = tmp_path / "q.csv"
+    empty.write_text("Sequence,Timestamp,Position,Classification\n")
+    with pytest.raises(ResultsError, match=r"--timestamps"):
+        export_results([log], tmp_path / "r.csv", empty)

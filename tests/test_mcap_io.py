@@ -352,6 +352,67 @@ def test_a_bug_is_not_reported_as_a_corrupt_log(
         list(iter_clouds(sample_log[0], tp.LIDAR_360))
 
 
+def write_log_without_summary(path: Path) -> list:
+    """A valid MCAP log with no summary section (mcap's Writer with every index turned off)."""
+    from mcap.writer import IndexType, Writer
+
+    source = io.BytesIO()
+    write_sample_log(source)
+    source.seek(0)
+    raw = list(make_reader(source).iter_messages(log_time_order=True))
+    with open(path, "wb") as f:
+        writer = Writer(
+            f,
+            index_types=IndexType.NONE,
+            repeat_channels=False,
+            repeat_schemas=False,
+            use_statistics=False,
+            use_summary_offsets=False,
+        )
+        writer.start()
+        ids: dict[str, int] = {}
+        for schema, channel, message in raw:
+            if channel.topic not in ids:
+                schema_id = writer.register_schema(schema.name, schema.encoding, schema.data)
+                ids[channel.topic] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schema_id
+                )
+            writer.add_message(
+                ids[channel.topic], message.log_time, message.data, message.publish_time
+            )
+        writer.add_metadata(tp.METADATA_SOURCE, {"sequence": "seq0001"})
+        writer.finish()
+    with open(path, "rb") as f:
+        assert make_reader(f).get_summary() is None
+    return raw
+
+
+def test_a_log_without_summary_is_read_by_a_scan(tmp_path: Path) -> None:
+    from cldet.io.rewrite import rewrite_log
+
+    path = tmp_path / "nosummary.mcap"
+    raw = write_log_without_summary(path)
+    with_summary = io.BytesIO()
+    written = write_sample_log(with_summary)
+    assert list_topics(path) == {t: n for t, n in written["counts"].items()}
+    clouds = list(iter_clouds(path, tp.LIDAR_360))
+    assert [c.stamp_ns for c in clouds] == [s for s, _ in written["clouds"]]
+    for cloud, (_, points) in zip(clouds, written["clouds"], strict=True):
+        np.testing.assert_array_equal(cloud.points, points)
+    assert read_metadata(path)[tp.METADATA_SOURCE] == {"sequence": "seq0001"}
+    with open_log(path) as log:
+        assert log.time_range() == (
+            min(m.log_time for _, _, m in raw),
+            max(m.log_time for _, _, m in raw),
+        )
+    out = tmp_path / "annotated.mcap"  # what annotate does with it: a full rewrite, with summary
+    rewrite_log(path, out, [])
+    with open(out, "rb") as f:
+        assert make_reader(f).get_summary() is not None
+    sources = {t: n for t, n in list_topics(path).items() if not t.startswith("/cldet/")}
+    assert list_topics(out) == sources  # earlier results replaced, as always
+
+
 # --- atomic output ---------------------------------------------------------------------------
 def test_atomic_output_replaces_only_when_complete(tmp_path: Path) -> None:
     target = tmp_path / "seq0001.mcap"

@@ -38,26 +38,37 @@ def export(
         int, typer.Option("--class-id", help="Classification written on every row.")
     ] = 0,
     max_extrapolation_s: Annotated[
-        float | None,
+        float,
         typer.Option(
             "--max-extrapolation-s",
             min=0.0,
             help="Follow the track's motion at most this many seconds beyond its first/last "
-            "estimate, then hold. Default: no limit.",
+            "estimate, then hold the position reached. `inf`: no limit.",
         ),
-    ] = None,
+    ] = 1.0,
+    allow_fallback: Annotated[
+        bool,
+        typer.Option(
+            "--allow-fallback",
+            help="Write the training-set mean position for a query sequence without a log or "
+            "whose log was never annotated (with a warning). Default: that is an error.",
+        ),
+    ] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
 ) -> None:
     """Write the challenge submission from annotated logs: one row per query row, in its order.
 
     Each sequence's /cldet/estimate trajectory is interpolated at the query stamps and
-    extrapolated by the track's own motion beyond its ends. A sequence without a log or without
-    any estimate gets the training-set mean position (0.734, -9.739, 33.353) and a warning.
+    extrapolated by the track's own motion beyond its ends (at most --max-extrapolation-s). A
+    query sequence without a log or without any estimate is an error; with --allow-fallback it
+    gets the training-set mean position (0.734, -9.739, 33.353) and a warning.
     """
+    import math
+
     from cldet.export import export_results
     from cldet.progress import BarProgress
 
-    limit_ns = None if max_extrapolation_s is None else round(max_extrapolation_s * 1e9)
+    limit_ns = None if math.isinf(max_extrapolation_s) else round(max_extrapolation_s * 1e9)
     with handled(), BarProgress() as bar:
         report = export_results(
             logs,
@@ -66,6 +77,7 @@ def export(
             class_id,
             overwrite=overwrite,
             max_extrapolation_ns=limit_ns,
+            allow_fallback=allow_fallback,
             progress=bar,
         )
     for warning in report.warnings:

@@ -29,7 +29,16 @@ from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 from google.protobuf.message import DecodeError
 from mcap.exceptions import McapError
 from mcap.reader import SeekingReader, make_reader
-from mcap.records import Attachment, Channel, ChunkIndex, Header, Message, Schema
+from mcap.records import (
+    Attachment,
+    Channel,
+    ChunkIndex,
+    Header,
+    Message,
+    Metadata,
+    Schema,
+    Statistics,
+)
 from mcap.stream_reader import StreamReader
 from mcap.summary import Summary
 from numpy.typing import NDArray
@@ -236,6 +245,44 @@ def _chunk_messages(record: bytes, offset: int, ids: set[int] | None) -> list[Me
     return messages
 
 
+def _scan_summary(path: Path) -> Summary:
+    """The summary of a log written without one, from reading every record (chunks expanded).
+
+    Schemas, channels and statistics (message counts per channel, time range); no chunk index,
+    so messages are then read by the generic reader, front to back.
+    """
+    summary = Summary()
+    counts: dict[int, int] = {}
+    start = end = None
+    n_metadata = n_attachments = 0
+    with open(path, "rb") as f:
+        for record in StreamReader(f, validate_crcs=True).records:
+            if isinstance(record, Schema):
+                summary.schemas[record.id] = record
+            elif isinstance(record, Channel):
+                summary.channels[record.id] = record
+            elif isinstance(record, Message):
+                counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
+                start = record.log_time if start is None else min(start, record.log_time)
+                end = record.log_time if end is None else max(end, record.log_time)
+            elif isinstance(record, Metadata):
+                n_metadata += 1
+            elif isinstance(record, Attachment):
+                n_attachments += 1
+    summary.statistics = Statistics(
+        message_count=sum(counts.values()),
+        schema_count=len(summary.schemas),
+        channel_count=len(summary.channels),
+        attachment_count=n_attachments,
+        metadata_count=n_metadata,
+        chunk_count=0,  # no chunk index: the generic reader reads them in file order
+        message_start_time=start or 0,
+        message_end_time=end or 0,
+        channel_message_counts=counts,
+    )
+    return summary
+
+
 class LogReader:
     """An open MCAP log: topics, metadata and typed iterators over its channels.
 
@@ -259,11 +306,21 @@ class LogReader:
             raise LogError(
                 f"{self.path} is not a readable MCAP log (truncated or corrupt): {_reason(err)}"
             ) from err
-        if summary is None or not isinstance(reader, SeekingReader):
+        if not isinstance(reader, SeekingReader):
             self._file.close()
-            raise LogError(
-                f"{self.path} has no summary section: truncated, or not finished by its writer"
-            )
+            raise LogError(f"{self.path} is not a seekable file: expected an MCAP log on disk")
+        if summary is None:  # the summary is optional in MCAP: learn the same from a scan
+            try:
+                summary = _scan_summary(self.path)
+            except OSError as err:
+                self._file.close()
+                raise LogError(f"cannot read {self.path}: {err.strerror or err}") from err
+            except _CORRUPT as err:
+                self._file.close()
+                raise LogError(
+                    f"{self.path} has no summary section and cannot be read through "
+                    f"(truncated or corrupt): {_reason(err)}"
+                ) from err
         self._reader = reader
         self._summary: Summary = summary
 
