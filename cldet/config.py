@@ -32,31 +32,43 @@ _STRICT = ConfigDict(extra="forbid", frozen=True)
 
 
 class FramesConfig(BaseModel):
-    """Pairing of the two LiDARs and point filtering."""
+    """Point filtering and when, inside a scan, a frame's points were taken."""
 
     model_config = _STRICT
 
-    max_gap_s: float = Field(
-        default=0.05, gt=0, description="max |Avia - Mid-360| stamp gap to pair"
-    )
     min_range_m: float = Field(default=0.3, ge=0, description="drop self-returns nearer than this")
     max_range_m: float = Field(default=150.0, gt=0, description="drop returns farther than this")
+    scan_offset_s: float = Field(
+        default=0.05,
+        ge=0,
+        le=1,
+        description="a frame's points are dated at its stamp plus this (the middle of the"
+        " Mid-360's 100 ms scan): a fast drone's estimate no longer leads the truth",
+    )
 
 
 class BackgroundConfig(BaseModel):
-    """Static range image learned over the whole sequence (see ``cldet.core.background``)."""
+    """Online static range image over a sliding window of time bins (see ``cldet.core.background``)."""
 
     model_config = _STRICT
 
     cell_deg: float = Field(
         default=2.0, gt=0, le=30, description="direction cell, azimuth and elevation"
     )
-    bin_s: float = Field(default=1.0, gt=0, description="time bin: a cell's nearest range per bin")
-    min_bin_fraction: float = Field(
-        default=0.85,
+    bin_s: float = Field(
+        default=0.2,
+        gt=0,
+        description="time bin: a cell's nearest range per bin; the first bin is the warm-up",
+    )
+    window_bins: int = Field(
+        default=30, ge=1, le=600, description="the static range is learned over this many bins"
+    )
+    static_fraction: float = Field(
+        default=0.25,
         gt=0,
         le=1,
-        description="static = reached in at least this fraction of time bins",
+        description="static = reached in at least this fraction of the window's bins (swaying"
+        " foliage that fills a direction part of the time stays background)",
     )
     dilate_cells: int = Field(
         default=1, ge=0, le=3, description="grow the static range by this many cells"
@@ -64,33 +76,18 @@ class BackgroundConfig(BaseModel):
     margin_m: float = Field(
         default=0.3, ge=0, description="foreground = nearer than static by more than"
     )
+    margin_fraction: float = Field(
+        default=0.03, ge=0, lt=1, description="... or this fraction of range"
+    )
     floating_max_size_m: float = Field(
         default=1.2,
         ge=0,
         description="static blobs this small floating in free space are not background (0: off)",
     )
-    floating_max_range_m: float = Field(default=30.0, gt=0, description="... when nearer than this")
-    floating_any_range_above_deg: float = Field(
-        default=50.0,
-        ge=0,
-        le=90,
-        description="above this elevation (the Avia cone) floating blobs count at any range",
-    )
-    arrival_after_s: float = Field(
-        default=0.8,
-        ge=0,
-        description="static blobs first reached this long after the start arrived and stayed"
-        " (a drone that flew in and hovers): not background (0: off)",
-    )
-    arrival_min_cells: int = Field(
-        default=3, ge=1, description="... when they cover at least this many direction cells"
-    )
-    release_caps: bool = Field(
+    protect_tracks: bool = Field(
         default=True,
-        description="small static caps on a narrower column (a hover on a pole top) are not background",
-    )
-    margin_fraction: float = Field(
-        default=0.03, ge=0, lt=1, description="... or this fraction of range"
+        description="points of confirmed small moving tracks are not learned as background (a"
+        " drone that flew in and hovers stays foreground)",
     )
 
 
@@ -129,10 +126,12 @@ class TrackingConfig(BaseModel):
         ge=0,
         description="a track whose detections (90 %) lie this close to their median is static",
     )
-    cruise_speed: float = Field(
-        default=8.0, gt=0, description="median speeds above this are less drone-like"
+    max_speed: float = Field(
+        default=30.0,
+        gt=0,
+        description="tracks faster than this (90th percentile) are not a drone (DJI drones"
+        " cruise at 15-23 m/s)",
     )
-    max_speed: float = Field(default=15.0, gt=0, description="above: not a drone")
     max_size_m: float = Field(
         default=1.2, gt=0, description="clusters larger than this are not a drone"
     )
@@ -146,9 +145,6 @@ class TrackingConfig(BaseModel):
         default=0.3,
         ge=0,
         description="clusters this close to the field's bottom may reach the ground (0: off)",
-    )
-    ground_z_m: float | None = Field(
-        default=None, description="ground height; None = learn from background"
     )
     link_max_gap_s: float = Field(
         default=8.0, gt=0, description="longest unseen gap bridged between tracks"

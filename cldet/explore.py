@@ -290,10 +290,11 @@ def _edges(values: NDArray[np.float64], step: float) -> NDArray[np.float64]:
 def learn_background(
     frames: Iterable[LidarFrame], config: CldetConfig | None = None
 ) -> BackgroundModel:
-    """Learn the static background of a sequence (pass 1 of the estimator) from its frames.
+    """Learn the static background (online, as the estimator does) from a sequence's frames.
 
     Both LiDARs' valid points within the configured range band are counted, as the estimator
-    does (:func:`cldet.core.estimator.fuse_points`).
+    does (:func:`cldet.core.estimator.fuse_points`). The model then holds the static range of
+    the last window of ``background.window_bins`` bins.
 
     Args:
         frames: every frame of the sequence, in stamp order.
@@ -304,9 +305,13 @@ def learn_background(
     """
     cfg = config or CldetConfig()
     model = BackgroundModel(cfg.background)
+    last_ns = None
     for frame in frames:
         points, _ = fuse_points(frame, cfg)
-        model.observe(frame.stamp_ns, points)
+        model.update(frame.stamp_ns, points)
+        last_ns = frame.stamp_ns
+    if last_ns is not None:  # finish the last bin so that it counts
+        model.advance(last_ns + int(round(cfg.background.bin_s * 1e9)))
     return model
 
 

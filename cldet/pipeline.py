@@ -2,22 +2,21 @@
 
 The flow for one log (times are integer ns throughout):
 
-1. pass 1 streams the paired Mid-360/Avia frames into the estimator's background model;
-2. pass 2 feeds them again through the per-frame verb (``process``) and the review view: from
-   memory when pass 1 could keep them (up to ``KEEP_FRAMES_BYTES`` of points, a few minutes of
-   recording), else streamed from the log a second time;
-3. ``finish`` associates, selects and smooths the drone's track over the whole sequence;
+1. one pass streams the paired Mid-360/Avia frames through the estimator's per-frame verb
+   (``register_frame``: background, clusters, tracks, the causal estimate) and the review view;
+2. ``refine`` selects and smooths the drone's track over what was stored per frame;
 4. the log is rewritten with the ``/cldet/*`` result channels (every source message copied byte
    for byte, earlier results replaced), atomically, and the ``.rrd`` renamed into place.
 
-Beyond that bound nothing holds more than one frame's raw points; what is kept per frame for the
-results is the small foreground.
+Nothing holds more than one frame's raw points; what is kept per frame for the results is the
+small foreground.
 """
 
 from __future__ import annotations
 
 import json
 import multiprocessing.context
+import os
 import time
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -30,18 +29,18 @@ from cldet import __version__
 from cldet.config import CldetConfig, config_to_dict
 from cldet.core.estimator import FrameDetections, SequenceEstimate, make_estimator
 from cldet.core.frames import pair_frames
-from cldet.errors import CldetError, LogError
+from cldet.errors import CldetError, FrameOrderError, LogError
 from cldet.io import topics
-from cldet.io.files import check_output
+from cldet.io.files import check_output, lock_file
 from cldet.io.mcap_read import iter_clouds, iter_positions, open_log
 from cldet.io.mcap_write import LogWriter
 from cldet.io.rewrite import Addition, rewrite_log
 from cldet.progress import NullProgress, Progress
+from cldet.signals import init_worker, stop_workers
 from cldet.types import Cloud, Estimate, LidarFrame, Source
 from cldet.view import NullView, RerunView, View
 
 METADATA_ANNOTATE = topics.METADATA_CONFIG
-KEEP_FRAMES_BYTES = 128 * 2**20  # pass-1 points kept for pass 2 up to this; beyond, read again
 
 
 @dataclass(frozen=True)
@@ -100,7 +99,7 @@ def annotate_log(
         output: where the annotated log goes; default ``log`` itself (rewritten in place).
         rrd: the Rerun review recording; default ``output`` with suffix ``.rrd``.
         write_rrd: False skips the recording.
-        progress: receives one unit per frame of each pass.
+        progress: receives one unit per frame.
 
     Returns:
         An :class:`AnnotateReport`.
@@ -137,24 +136,17 @@ def annotate_log(
         view = RerunView(rrd_path, recording_name=f"cldet {sequence}")
     try:
         estimator = make_estimator(config)
-        progress.start(2 * n_frames, f"{sequence}: background, then tracking")
-        kept: list[LidarFrame] | None = []  # pass-1 frames kept for pass 2 while small enough
-        kept_bytes = 0
-        for frame in _frames(log, has_avia):
-            estimator.observe(frame)
-            progress.advance()
-            if kept is not None:
-                kept.append(frame)
-                kept_bytes += frame.mid360.nbytes + frame.avia.nbytes
-                if kept_bytes > KEEP_FRAMES_BYTES:
-                    kept = None  # a long sequence: pass 2 streams the log again
+        progress.start(n_frames, f"{sequence}: tracking")
         detections: list[FrameDetections] = []
-        for frame in kept if kept is not None else _frames(log, has_avia):
-            found_here = estimator.process(frame)
-            detections.append(found_here)
-            view.log_frame(frame, found_here)
-            progress.advance()
-        result = estimator.finish()
+        try:
+            for frame in _frames(log, has_avia):
+                found_here = estimator.register_frame(frame)
+                detections.append(found_here)
+                view.log_frame(frame, found_here)
+                progress.advance()
+        except FrameOrderError as err:
+            raise FrameOrderError(f"{log}: {err}") from err
+        result = estimator.refine()
         view.log_result(result, detections)
         truth = (
             list(iter_positions(log, topics.GROUND_TRUTH)) if found.get(topics.GROUND_TRUTH) else []
@@ -220,7 +212,9 @@ def result_additions(
     """The ``/cldet/*`` messages of one annotate run, as ``(log_time_ns, write)`` pairs.
 
     - ``/cldet/estimate`` (cldet.Estimate) and ``/cldet/pose`` (foxglove.PoseInFrame)
-      per estimate;
+      per estimate of the refined track;
+    - ``/cldet/causal`` (cldet.Estimate): the causal estimate of each frame, as it was made
+      from that frame and the ones before (what a live run shows);
     - ``/cldet/trajectory`` (foxglove.PosesInFrame): the whole smoothed trajectory, once, at the
       first frame's stamp, so a viewer shows it for the whole playback;
     - ``/cldet/clusters`` (foxglove.SceneUpdate) per frame: a box and label per cluster, the
@@ -231,6 +225,8 @@ def result_additions(
     additions: list[tuple[int, Addition]] = []
     for est in result.estimates:
         additions.append((est.stamp_ns, _estimate_writer(est)))
+    for est in result.causal:
+        additions.append((est.stamp_ns, _causal_writer(est)))
     if result.estimates:
         first = result.estimates[0].stamp_ns
         positions = np.array([e.position for e in result.estimates], dtype=np.float64)
@@ -247,6 +243,13 @@ def _estimate_writer(est: Estimate) -> Addition:
     def write(writer: LogWriter) -> None:
         writer.write_estimate(topics.ESTIMATE, est.stamp_ns, est)
         writer.write_pose(topics.POSE, est.stamp_ns, est.position, topics.FRAME_MID360)
+
+    return write
+
+
+def _causal_writer(est: Estimate) -> Addition:
+    def write(writer: LogWriter) -> None:
+        writer.write_estimate(topics.CAUSAL, est.stamp_ns, est)
 
     return write
 
@@ -277,6 +280,33 @@ def _clusters_writer(det: FrameDetections, chosen_id: int | None) -> Addition:
     return write
 
 
+def annotate_log_locked(
+    log: Path,
+    *,
+    config: CldetConfig | None = None,
+    output: Path | None = None,
+    rrd: Path | None = None,
+    write_rrd: bool = True,
+    force: bool = False,
+    progress: Progress | None = None,
+) -> AnnotateReport:
+    """:func:`annotate_log` while holding an exclusive lock on the log (a second run refuses).
+
+    Args:
+        force: rewrite an output that is read-only (its mode is kept); otherwise refused.
+        others: as :func:`annotate_log`.
+
+    Raises:
+        OutputError: another process is annotating the log; the output is read-only and
+            ``force`` is false; as :func:`annotate_log`.
+    """
+    check_output(output if output is not None else log, "annotated log", force=force)
+    with lock_file(log, "log"):
+        return annotate_log(
+            log, config=config, output=output, rrd=rrd, write_rrd=write_rrd, progress=progress
+        )
+
+
 def annotate_logs(
     logs: Sequence[Path],
     *,
@@ -284,11 +314,14 @@ def annotate_logs(
     outputs: Sequence[Path] | None = None,
     write_rrd: bool = True,
     workers: int = 1,
+    force: bool = False,
     progress: Progress | None = None,
 ) -> tuple[list[AnnotateReport], list[tuple[Path, str]]]:
     """Annotate several logs, in parallel processes when ``workers > 1``.
 
-    One failing log is reported and the others still run.
+    One failing log is reported and the others still run. Each log is locked while it is
+    annotated (:func:`annotate_log_locked`). On Ctrl-C or SIGTERM the workers are stopped and
+    remove their temporary files; a worker stops by itself when this process dies.
 
     Args:
         logs: the MCAP logs.
@@ -296,6 +329,7 @@ def annotate_logs(
         outputs: one output path per log (default: each log rewritten in place).
         write_rrd: write a ``.rrd`` beside each output.
         workers: processes; 1 runs in this process (with per-frame progress).
+        force: rewrite read-only logs (their mode is kept).
         progress: one unit per frame (single worker) or per log (several).
 
     Returns:
@@ -310,25 +344,46 @@ def annotate_logs(
     if workers <= 1 or len(logs) == 1:
         for i, log in enumerate(logs):
             try:
-                done[i] = annotate_log(
-                    log, config=config, output=targets[i], write_rrd=write_rrd, progress=progress
+                done[i] = annotate_log_locked(
+                    log,
+                    config=config,
+                    output=targets[i],
+                    write_rrd=write_rrd,
+                    force=force,
+                    progress=progress,
                 )
             except CldetError as err:
                 failures.append((Path(log), str(err)))
         return [done[i] for i in sorted(done)], failures
     progress.start(len(logs), "annotating")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context()) as pool:
+    with ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=_mp_context(),
+        initializer=init_worker,
+        initargs=(os.getpid(),),
+    ) as pool:
         futures = {
-            pool.submit(annotate_log, log, config=config, output=targets[i], write_rrd=write_rrd): i
+            pool.submit(
+                annotate_log_locked,
+                log,
+                config=config,
+                output=targets[i],
+                write_rrd=write_rrd,
+                force=force,
+            ): i
             for i, log in enumerate(logs)
         }
-        for future in as_completed(futures):
-            i = futures[future]
-            try:
-                done[i] = future.result()
-            except CldetError as err:
-                failures.append((Path(logs[i]), str(err)))
-            progress.advance()
+        try:
+            for future in as_completed(futures):
+                i = futures[future]
+                try:
+                    done[i] = future.result()
+                except CldetError as err:
+                    failures.append((Path(logs[i]), str(err)))
+                progress.advance()
+        except BaseException:  # Ctrl-C, SIGTERM: stop the workers instead of waiting for them
+            stop_workers(pool)
+            raise
     return [done[i] for i in sorted(done)], failures
 
 

@@ -51,7 +51,7 @@ def test_annotate_adds_result_channels_and_keeps_sources_byte_identical(
     counts = list_topics(out)
     n_frames = counts[topics.LIDAR_360]
     assert report.frames == n_frames
-    for topic in (topics.ESTIMATE, topics.POSE, topics.FOREGROUND):
+    for topic in (topics.ESTIMATE, topics.CAUSAL, topics.POSE, topics.FOREGROUND):
         assert counts[topic] == n_frames, topic
     assert counts[topics.TRAJECTORY] == 1
     assert counts[topics.CLUSTERS] == 2 * n_frames  # the other clusters and the chosen one
@@ -65,6 +65,7 @@ def test_annotate_adds_result_channels_and_keeps_sources_byte_identical(
     }
     assert schema_of == {
         topics.ESTIMATE: "cldet.Estimate",
+        topics.CAUSAL: "cldet.Estimate",
         topics.POSE: "foxglove.PoseInFrame",
         topics.TRAJECTORY: "foxglove.PosesInFrame",
         topics.CLUSTERS: "foxglove.SceneUpdate",
@@ -95,7 +96,7 @@ def test_a_failure_midway_leaves_the_log_intact_and_no_temporary_file(
     shutil.copy(source_log, log)
     original = log.read_bytes()
     calls = {"n": 0}
-    real_process = estimator_module.TrackEstimator.process
+    real_process = estimator_module.TrackEstimator.register_frame
 
     def failing(self: estimator_module.TrackEstimator, frame):  # type: ignore[no-untyped-def]
         calls["n"] += 1
@@ -103,7 +104,7 @@ def test_a_failure_midway_leaves_the_log_intact_and_no_temporary_file(
             raise RuntimeError("disk on fire")
         return real_process(self, frame)
 
-    monkeypatch.setattr(estimator_module.TrackEstimator, "process", failing)
+    monkeypatch.setattr(estimator_module.TrackEstimator, "register_frame", failing)
     with pytest.raises(RuntimeError, match="disk on fire"):
         annotate_log(log)
     assert log.read_bytes() == original
@@ -217,15 +218,23 @@ def test_track_beats_cl_det_on_unseen_seeds(
     assert np.isfinite(track.rms_error_m)
 
 
-def test_streaming_pass_two_gives_the_same_results_as_kept_frames(
+def test_annotate_reads_the_log_once_and_writes_the_causal_estimate(
     source_log: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     import cldet.pipeline
 
-    kept = tmp_path / "kept.mcap"
-    annotate_log(source_log, output=kept, write_rrd=False)
-    monkeypatch.setattr(cldet.pipeline, "KEEP_FRAMES_BYTES", 0)  # force a second read
-    streamed = tmp_path / "streamed.mcap"
-    annotate_log(source_log, output=streamed, write_rrd=False)
-    results = [[m for m in _messages(p) if m[0].startswith("/cldet/")] for p in (kept, streamed)]
-    assert results[0] == results[1] and results[0]
+    reads: list[str] = []
+    real = cldet.pipeline.iter_clouds
+
+    def counting(log, topic, *args, **kwargs):  # type: ignore[no-untyped-def]
+        reads.append(topic)
+        return real(log, topic, *args, **kwargs)
+
+    monkeypatch.setattr(cldet.pipeline, "iter_clouds", counting)
+    out = tmp_path / "once.mcap"
+    report = annotate_log(source_log, output=out, write_rrd=False)
+    assert sorted(reads) == ["/lidar_360", "/livox_avia"]  # one pass: each cloud topic once
+    messages = _messages(out)
+    causal = [m for m in messages if m[0] == "/cldet/causal"]
+    refined = [m for m in messages if m[0] == "/cldet/estimate"]
+    assert len(causal) == len(refined) == report.frames

@@ -12,8 +12,9 @@ Per Mid-360 frame:
 
 What differs from the report, and why: the report drew the environment zones by hand from a
 ground-truth heatmap of the training set. Here the environment is learned from the sequence
-itself with the same static background model as ``track`` (``cldet.core.background``, pass 1,
-fed with both LiDARs): a point is environment when it is CORE or MARGIN background. Nothing
+itself with the same online static background model as ``track`` (``cldet.core.background``,
+fed with both LiDARs; nothing is foreground during its warm-up): a point is environment when
+it is CORE or MARGIN background. Nothing
 else from ``track`` is used (no range filter, no tracking, no smoothing, no bias correction):
 only non-finite and exactly-zero rows are dropped. The report's time alignment of the two
 LiDARs is the frame pairing done before the estimator.
@@ -34,7 +35,13 @@ from sklearn.cluster import DBSCAN
 from cldet.config import CldetConfig
 from cldet.core.background import FOREGROUND, BackgroundModel
 from cldet.core.clustering import summarize_clusters
-from cldet.core.estimator import FrameDetections, SequenceEstimate, TrackEvent, fuse_points
+from cldet.core.estimator import (
+    FrameDetections,
+    SequenceEstimate,
+    TrackEvent,
+    check_order,
+    fuse_points,
+)
 from cldet.core.frames import valid_points
 from cldet.types import Estimate, LidarFrame, Source
 
@@ -61,12 +68,6 @@ class ClDetEstimator:
         self._sum = np.zeros(3)
         self._mode = ""
 
-    def observe(self, frame: LidarFrame) -> None:
-        """Pass 1: learn the environment (static background) from both LiDARs."""
-        if self._learned:
-            pts, _ = fuse_points(frame, self.config)
-            self.background.observe(frame.stamp_ns, pts)
-
     def _emit(
         self, stamp_ns: int, pos: np.ndarray, source: Source, n: int, sigma: float, mode: str
     ) -> None:
@@ -76,10 +77,17 @@ class ClDetEstimator:
             self._events.append(TrackEvent(stamp_ns, mode, f"cl-det estimate from {mode}"))
             self._mode = mode
 
-    def process(self, frame: LidarFrame) -> FrameDetections:
-        """Pass 2: environment removal, DBSCAN, largest cluster's mean (or the fallbacks)."""
+    def register_frame(self, frame: LidarFrame) -> FrameDetections:
+        """Environment removal, DBSCAN, largest cluster's mean (or the fallbacks)."""
+        check_order(self._estimates[-1].stamp_ns if self._estimates else None, frame.stamp_ns)
         mid = valid_points(frame.mid360)
-        fg = mid[self.background.classify(mid) == FOREGROUND] if self._learned else mid
+        if self._learned:
+            self.background.advance(frame.stamp_ns)
+            fg = mid[self.background.classify(mid) == FOREGROUND]
+            pts, _ = fuse_points(frame, self.config)
+            self.background.update(frame.stamp_ns, pts)
+        else:
+            fg = mid
         labels = np.full(len(fg), -1, dtype=np.int32)
         clusters: tuple = ()
         if len(fg):
@@ -112,8 +120,9 @@ class ClDetEstimator:
                 self._emit(
                     frame.stamp_ns, mean, Source.FALLBACK, 0, _FALLBACK_SIGMA_M, "training mean"
                 )
-        return FrameDetections(frame.stamp_ns, fg, labels, clusters)
+        return FrameDetections(frame.stamp_ns, fg, labels, clusters, self._estimates[-1])
 
-    def finish(self) -> SequenceEstimate:
-        """The per-frame estimates as they were made (cl-det is causal)."""
-        return SequenceEstimate(tuple(self._estimates), dict(self._chosen), tuple(self._events))
+    def refine(self) -> SequenceEstimate:
+        """The per-frame estimates as they were made (cl-det is causal: nothing is refined)."""
+        estimates = tuple(self._estimates)
+        return SequenceEstimate(estimates, dict(self._chosen), tuple(self._events), estimates)

@@ -1,40 +1,49 @@
 """The estimator: one interface, two methods (``track``, ours, and ``cl-det``, the baseline).
 
-An estimator sees a sequence twice, in order: ``observe`` every frame (pass 1: learn the static
-background), then ``process`` every frame (pass 2: the per-frame verb, returning that frame's
-foreground and clusters), then ``finish`` once (association, selection, smoothing: the method is
-offline). Memory stays small: per frame only the clusters are kept.
+An estimator sees a sequence once, in stamp order, through one per-frame verb
+(KISS-ICP's shape): ``register_frame(frame)`` uses only the past and returns that frame's
+foreground, clusters and the *causal* estimate. After the last frame ``refine()`` works over
+what was stored per frame (the clusters and the candidate tracks, never the raw points) and
+returns the *refined* track: the best whole-sequence choice, smoothed and gap-filled.
 
-``track`` (:class:`TrackEstimator`):
+``track`` (:class:`TrackEstimator`), per frame:
 
-1. both LiDARs fused in the Mid-360 frame (the Avia fires ~14 ms later: < 0.2 m at 15 m/s,
+1. both LiDARs fused in the Mid-360 frame (the Avia fires ~14 ms later: < 0.3 m at 20 m/s,
    well inside the clustering radius); self-returns and far returns dropped (``frames``);
-2. static background removed (``cldet.core.background``: per-direction static range over time
-   bins, dilated);
+2. the static background, learned online over a sliding window, removed
+   (``cldet.core.background``; the first ``background.bin_s`` is its warm-up);
 3. the foreground clustered exactly (``cldet.core.clustering``: DBSCAN eps 1 m, min 1 point, as
-   a far drone gives 1-3 points);
-4. every cluster seeds or extends a candidate Kalman track (``cldet.core.tracking``);
-   a confirmed moving track that gets no cluster continues on the raw points (background
-   included) within ``raw_gate_m`` of its prediction, so a drone stopping at static structure
-   does not vanish;
-5. ``finish``: the drone's chain of tracks chosen by whole-sequence evidence
-   (``cldet.core.selection``); a forward-backward RTS smoother (``cldet.core.smoothing``)
-   fills the gaps; before the first and after the last detection the track's own motion is
-   extrapolated, its velocity decaying with time constant ``extrapolation_tau_s`` (a drone
-   does not fly straight for ever); the centroid bias correction (``cldet.core.bias``) is
-   applied last. Only when no candidate track exists at all is the configured fallback
-   position used.
+   a far drone gives 1-3 points); each cluster's height above the local ground comes from the
+   fitted ground (``cldet.core.ground``), set to 0 when the cluster may continue below what is
+   seen (cut by the bottom of the Mid-360's field of view, ``fov_bottom_deg`` in the sensor's
+   own frame, or hidden by the ground's background margin one cell below);
+4. every cluster seeds or extends a candidate Kalman track (``cldet.core.tracking``), at the
+   time its points were taken (the stamp plus ``frames.scan_offset_s``, the middle of the
+   scan); a confirmed moving track that gets no cluster continues on the raw points near its
+   prediction; the points of confirmed small moving tracks are withheld from the background
+   (``background.protect_tracks``), so a drone that stops to hover is not learned;
+5. the causal choice: the active track with the highest running evidence (the per-detection
+   weights of ``cldet.core.selection``, times its static and speed factors so far; a challenger
+   must beat the current choice by ``_SWITCH_RATIO``); the estimate is that track's filtered
+   state moved back from the points' time to the stamp.
+
+``refine``: the drone's chain of tracks chosen by whole-sequence evidence
+(``cldet.core.selection``); a forward-backward RTS smoother (``cldet.core.smoothing``) fills
+the gaps; before the first and after the last detection the track's own motion is
+extrapolated, its velocity decaying with time constant ``extrapolation_tau_s``; the centroid
+bias correction (``cldet.core.bias``) is applied last. Only when no candidate track exists at
+all is the configured fallback position used.
 
 Each estimate's source: DETECTED (the chosen track had a cluster, or raw points, in that
 frame; ``n_points`` is their count), SMOOTHED (between detections), PREDICTED (before the
-first or after the last detection), FALLBACK (no track at all). ``sigma_m`` is the smoother's
-per-axis 1-sigma position uncertainty (the model is isotropic).
+first or after the last detection, or, causally, a frame the chosen track was not seen in),
+FALLBACK (no track at all). ``sigma_m`` is the per-axis 1-sigma position uncertainty.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
@@ -45,9 +54,16 @@ from cldet.core.background import FOREGROUND, BackgroundModel
 from cldet.core.bias import apply_bias
 from cldet.core.clustering import cluster_points, summarize_clusters
 from cldet.core.frames import valid_points
-from cldet.core.selection import ScoredTrack, score_tracks, select_chain
+from cldet.core.selection import (
+    STATIC_FACTOR,
+    ScoredTrack,
+    detection_weights,
+    score_tracks,
+    select_chain,
+)
 from cldet.core.smoothing import extrapolate, rts_smooth
 from cldet.core.tracking import CandidateTracker, ClusterTable
+from cldet.errors import FrameOrderError
 from cldet.types import Cluster, Estimate, LidarFrame, Source
 
 __all__ = [
@@ -63,16 +79,20 @@ __all__ = [
 
 NS_PER_S = 1_000_000_000
 _LOST_AFTER_S = 0.5  # a gap without detection longer than this is reported as lost/reacquired
+_SWITCH_RATIO = 1.3  # causal choice: a challenger must have this much more evidence
+_JUDGE_STATIC_S = 1.0  # causal: a track must live this long before it is judged static
+_CAUSAL_MIN_SCORE = 0.0  # any track with a second detection beats holding or the fallback
 
 
 @dataclass(frozen=True)
 class FrameDetections:
-    """What ``process`` returns for one frame (plain data for channels and visualisation)."""
+    """What ``register_frame`` returns for one frame (plain data for channels and views)."""
 
     stamp_ns: int
     foreground: NDArray[np.float32]  # (M,3) foreground points, metres, Mid-360 frame
     labels: NDArray[np.int32]  # (M,) cluster id per foreground point, -1 noise
     clusters: tuple[Cluster, ...]
+    estimate: Estimate | None = None  # the causal estimate (None: the method makes none)
 
 
 @dataclass(frozen=True)
@@ -86,26 +106,65 @@ class TrackEvent:
 
 @dataclass(frozen=True)
 class SequenceEstimate:
-    """The result of ``finish``."""
+    """The result of ``refine``."""
 
-    estimates: tuple[Estimate, ...]  # one per processed frame stamp, in time order
+    estimates: tuple[Estimate, ...]  # refined: one per frame stamp, in time order
     chosen: dict[int, int]  # stamp_ns -> cluster_id chosen in that frame (absent when none)
     events: tuple[TrackEvent, ...]
+    causal: tuple[Estimate, ...] = ()  # the causal estimate of every frame, as it was made
 
 
 class Estimator(Protocol):
-    """Two passes over a sequence, then ``finish``."""
+    """One per-frame verb over a sequence in stamp order, then ``refine``."""
 
     name: str
 
-    def observe(self, frame: LidarFrame) -> None:
-        """Pass 1: learn the background (called for every frame, in order)."""
+    def register_frame(self, frame: LidarFrame) -> FrameDetections:
+        """The per-frame verb: uses only this and earlier frames (stamps strictly increasing)."""
 
-    def process(self, frame: LidarFrame) -> FrameDetections:
-        """Pass 2: the per-frame verb (called for every frame, in order)."""
+    def refine(self) -> SequenceEstimate:
+        """After the last frame: the refined track over what was stored per frame."""
 
-    def finish(self) -> SequenceEstimate:
-        """After pass 2: association, selection, smoothing."""
+
+def check_order(last_ns: int | None, stamp_ns: int) -> None:
+    """Raise :class:`FrameOrderError` unless ``stamp_ns`` comes strictly after ``last_ns``."""
+    if last_ns is not None and stamp_ns <= last_ns:
+        kind = "repeats the stamp of the previous frame" if stamp_ns == last_ns else "comes before"
+        raise FrameOrderError(
+            f"frame stamped {stamp_ns} ns {kind} {last_ns} ns: frames must be in strictly"
+            " increasing stamp order"
+        )
+
+
+@dataclass
+class _Evidence:
+    """A candidate track's running evidence for the causal choice."""
+
+    weight: float = 0.0  # summed per-detection weights after the first detection
+    hits: int = 0
+    first_t_s: float = 0.0
+    last_t_s: float = 0.0
+    both: int = 0  # detections seen by both LiDARs in one cluster
+    lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
+    upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
+
+    def add(self, t_s: float, weight: float, position: NDArray[np.float64], both: bool) -> None:
+        if self.hits:
+            self.weight += weight
+        else:
+            self.first_t_s = t_s
+        self.last_t_s = t_s
+        self.hits += 1
+        self.both += int(both)
+        np.minimum(self.lower, position, out=self.lower)
+        np.maximum(self.upper, position, out=self.upper)
+
+    def score(self, static_spread_m: float) -> float:
+        """Running evidence; "static" is judged once the track has lived ``_JUDGE_STATIC_S``."""
+        moved = float(np.max(self.upper - self.lower)) if self.hits else 0.0
+        judged = self.last_t_s - self.first_t_s >= _JUDGE_STATIC_S
+        factor = STATIC_FACTOR if judged and moved < 2.0 * static_spread_m else 1.0
+        return self.weight * factor * (1.0 + 0.5 * self.both / max(self.hits, 1))
 
 
 def fuse_points(frame: LidarFrame, cfg: CldetConfig) -> tuple[NDArray[np.float32], int]:
@@ -129,26 +188,24 @@ class TrackEstimator:
         self._tracker = CandidateTracker(config.tracking)
         self._stamps: list[int] = []
         self._tables: list[ClusterTable] = []
-        self._last_observed: int | None = None
+        self._times = np.zeros(1024)  # observation time of each frame, s from the first stamp
+        self._evidence: dict[int, _Evidence] = {}
+        self._choice: int | None = None  # causal: the track followed
+        self._causal: list[Estimate] = []
+        self._offset_s = config.frames.scan_offset_s
+        fc = config.tracking
+        self._fov_tan = np.tan(np.radians(fc.fov_bottom_deg))
 
-    def observe(self, frame: LidarFrame) -> None:
-        """Pass 1: count the frame's points into the background model."""
-        if self._last_observed is not None and frame.stamp_ns < self._last_observed:
-            raise ValueError(f"frames out of order: {frame.stamp_ns} after {self._last_observed}")
-        self._last_observed = frame.stamp_ns
-        pts, _ = fuse_points(frame, self.config)
-        self.background.observe(frame.stamp_ns, pts)
-
-    def process(self, frame: LidarFrame) -> FrameDetections:
-        """Pass 2: remove the background, cluster the foreground, advance the candidate tracks."""
-        if self._stamps and frame.stamp_ns <= self._stamps[-1]:
-            raise ValueError(f"frames out of order: {frame.stamp_ns} after {self._stamps[-1]}")
+    # ------------------------------------------------------------- per frame
+    def register_frame(self, frame: LidarFrame) -> FrameDetections:
+        """Background, clusters, candidate tracks and the causal estimate of one frame."""
+        check_order(self._stamps[-1] if self._stamps else None, frame.stamp_ns)
         cfg = self.config
         index = len(self._stamps)
         pts, n_mid = fuse_points(frame, cfg)
-        lab = self.background.classify(pts)
-        fg_mask = lab == FOREGROUND
-        fg_idx = np.flatnonzero(fg_mask)
+        bg = self.background
+        bg.advance(frame.stamp_ns)
+        fg_idx = np.flatnonzero(bg.classify(pts) == FOREGROUND)
         if len(fg_idx) > cfg.clustering.max_points:  # keep the nearest
             r2 = np.einsum("ij,ij->i", pts[fg_idx], pts[fg_idx])
             fg_idx = np.sort(fg_idx[np.argsort(r2, kind="stable")[: cfg.clustering.max_points]])
@@ -158,45 +215,171 @@ class TrackEstimator:
         clusters = summarize_clusters(fg, labels, n_mid_fg)
         table = ClusterTable.from_clusters(clusters)
         if len(clusters):
-            # a cluster whose continuation below is hidden by the background (a person's legs
-            # in the ground's margin) may reach the ground: its height evidence says so
-            low = table.low_z()
-            bottom = np.column_stack([table.centroid[:, :2], low])
-            hidden = self.background.hidden_below(bottom)
-            if hidden.any():
-                table = replace(table, lower_z=np.where(hidden, self.background.ground_z(), low))
+            table = replace(table, height=self._heights(clusters))
         self._stamps.append(frame.stamp_ns)
         self._tables.append(table)
-        self._tracker.step(index, (frame.stamp_ns - self._stamps[0]) / NS_PER_S, table, pts)
+        t_s = (frame.stamp_ns - self._stamps[0]) / NS_PER_S + self._offset_s
+        if index == len(self._times):
+            self._times = np.concatenate([self._times, np.zeros(len(self._times))])
+        self._times[index] = t_s
+        owner = self._tracker.step(index, t_s, table, pts)
+        keep = self._account(index, t_s, table, owner, labels, fg_idx, pts)
+        bg.update(frame.stamp_ns, pts if keep is None else pts[keep])
+        estimate = self._decide(index, frame.stamp_ns)
+        self._causal.append(estimate)
         return FrameDetections(
-            stamp_ns=frame.stamp_ns, foreground=fg, labels=labels, clusters=clusters
+            stamp_ns=frame.stamp_ns,
+            foreground=fg,
+            labels=labels,
+            clusters=clusters,
+            estimate=estimate,
         )
 
-    # ------------------------------------------------------------------ finish
-    def finish(self) -> SequenceEstimate:
-        """Select the drone's chain of tracks, fill gaps from raw points, smooth, extrapolate."""
+    def _heights(self, clusters: tuple[Cluster, ...]) -> NDArray[np.float64]:
+        """(K,) each cluster's lowest point above the local ground, 0 where it may continue."""
+        lo = np.array([c.lower for c in clusters])
+        hi = np.array([c.upper for c in clusters])
+        centroid = np.array([c.centroid for c in clusters])
+        # the box's eight corners: with a tilted sensor "lowest" is along the ground's up
+        corners = np.stack(
+            [np.where([(m >> d) & 1 for d in range(3)], hi, lo) for m in range(8)], axis=1
+        )
+        height = self.background.ground.height_above(corners.reshape(-1, 3)).reshape(-1, 8)
+        height = height.min(axis=1)
+        tc = self.config.tracking
+        bottom = np.column_stack([centroid[:, :2], lo[:, 2]])
+        may_continue = self.background.hidden_below(bottom)
+        if tc.fov_cut_m > 0:
+            # cut by the bottom of the Mid-360's field of view (the sensor's own frame)
+            horiz = np.hypot(bottom[:, 0], bottom[:, 1])
+            may_continue |= bottom[:, 2] <= self._fov_tan * horiz + tc.fov_cut_m
+        return np.where(may_continue & np.isfinite(height), 0.0, height)
+
+    def _account(
+        self,
+        index: int,
+        t_s: float,
+        table: ClusterTable,
+        owner: NDArray[np.int64],
+        labels: NDArray[np.int32],
+        fg_idx: NDArray[np.intp],
+        pts: NDArray[np.float32],
+    ) -> NDArray[np.bool_] | None:
+        """Add this frame's detections to the tracks' evidence; the points the background may learn.
+
+        Returns a mask over ``pts`` (None: all), without the points of confirmed small movers.
+        """
+        tc = self.config.tracking
+        tracker = self._tracker
+        protect = self.config.background.protect_tracks
+        keep: NDArray[np.bool_] | None = None
+        if len(owner):
+            w = detection_weights(
+                table.extent,
+                table.heights(),
+                np.zeros(len(owner), dtype=bool),
+                np.array([tracker.last_hit(int(t))[3] for t in owner]),
+                tc,
+            )
+            both = (table.n_mid360 > 0) & (table.n_avia > 0)
+            for j, tid in enumerate(owner.tolist()):
+                self._evidence.setdefault(tid, _Evidence()).add(
+                    t_s, float(w[j]), table.centroid[j], bool(both[j])
+                )
+                if protect and tracker.is_confirmed_mover(tid):
+                    if keep is None:
+                        keep = np.ones(len(pts), dtype=bool)
+                    keep[fg_idx[labels == j]] = False
+        # raw-gate detections of this frame (tracks that got no cluster)
+        active = tracker.active()
+        gate2 = tc.raw_gate_m**2
+        for tid in active.ids.tolist():
+            f, c, pos, nis = tracker.last_hit(tid)
+            if f != index or c >= 0:
+                continue
+            w = detection_weights(
+                np.zeros(1), np.full(1, np.nan), np.ones(1, dtype=bool), np.array([nis]), tc
+            )
+            self._evidence.setdefault(tid, _Evidence()).add(t_s, float(w[0]), pos, False)
+            if protect:
+                if keep is None:
+                    keep = np.ones(len(pts), dtype=bool)
+                d = pts - pos.astype(np.float32)
+                keep &= np.einsum("ij,ij->i", d, d) > gate2
+        return keep
+
+    def _decide(self, index: int, stamp_ns: int) -> Estimate:
+        """The causal estimate: the active track with the most evidence so far."""
+        tc = self.config.tracking
+        active = self._tracker.active()
+        best, best_key, current_score = None, (0.0, 0), 0.0
+        row = {}
+        table = self._tables[index]
+        for i, tid in enumerate(active.ids.tolist()):
+            ev = self._evidence.get(tid)
+            if ev is None:
+                continue
+            row[tid] = i
+            sc = ev.score(tc.static_spread_m)
+            if tid == self._choice:
+                current_score = sc
+            # ties (young tracks) go to the one seen with more points now: the surer object
+            f, c, _, _ = self._tracker.last_hit(tid)
+            key = (sc, int(table.n_points[c]) if f == index and c >= 0 else 0)
+            if key > best_key:
+                best, best_key = tid, key
+        best_score = best_key[0]
+        if self._choice in row and current_score * _SWITCH_RATIO >= best_score:
+            best = self._choice
+        if best is None or best_score <= _CAUSAL_MIN_SCORE:
+            best = self._choice if self._choice in row else None
+        self._choice = best
+        if best is None:
+            return self._hold(stamp_ns)
+        i = row[best]
+        pos = active.position[i] - active.velocity[i] * self._offset_s
+        f, c, _, _ = self._tracker.last_hit(best)
+        seen = f == index
+        n = 0
+        if seen and c >= 0:
+            n = int(self._tables[index].n_points[c])
+        pos = apply_bias(pos[None, :], self.config.bias)[0]
+        return Estimate(
+            stamp_ns,
+            pos,
+            Source.DETECTED if seen else Source.PREDICTED,
+            n,
+            float(np.sqrt(max(active.pos_var[i], 0.0))),
+        )
+
+    def _hold(self, stamp_ns: int) -> Estimate:
+        """No track to follow: the last causal estimate held, or the fallback position."""
+        if self._causal and self._causal[-1].source != Source.FALLBACK:
+            last = self._causal[-1]
+            dt = (stamp_ns - last.stamp_ns) / NS_PER_S
+            sigma = float(np.hypot(last.sigma_m, self.config.tracking.init_speed_sigma * dt))
+            return Estimate(stamp_ns, last.position.copy(), Source.PREDICTED, 0, sigma)
+        pos = np.asarray(self.config.tracking.fallback_position, dtype=np.float64)
+        return Estimate(stamp_ns, pos, Source.FALLBACK, 0, 1e3)
+
+    # ------------------------------------------------------------------ refine
+    def refine(self) -> SequenceEstimate:
+        """Select the drone's chain of tracks over the whole sequence, smooth, extrapolate."""
         cfg = self.config
         n = len(self._stamps)
+        causal = tuple(self._causal)
         if n == 0:
-            return SequenceEstimate((), {}, ())
+            return SequenceEstimate((), {}, (), causal)
         stamps = np.asarray(self._stamps, dtype=np.int64)
-        t_s = (stamps - stamps[0]) / NS_PER_S
+        t_s = self._times[:n].copy()  # observation times (stamp + scan offset)
         tc = cfg.tracking
-        ground = tc.ground_z_m if tc.ground_z_m is not None else self.background.ground_z()
-        scored = score_tracks(
-            self._tracker.records(),
-            self._tables,
-            t_s,
-            ground,
-            tc,
-            free_sky_deg=self.config.background.floating_any_range_above_deg,
-        )
+        scored = score_tracks(self._tracker.records(), self._tables, t_s, tc)
         chain = select_chain(scored, tc)
         if not chain:
             pos = np.asarray(tc.fallback_position, dtype=np.float64)
             est = tuple(Estimate(int(s), pos.copy(), Source.FALLBACK, 0, 1e3) for s in stamps)
             ev = TrackEvent(int(stamps[0]), "lost", "no candidate track: fallback position")
-            return SequenceEstimate(est, {}, (ev,))
+            return SequenceEstimate(est, {}, (ev,), causal)
 
         z = np.full((n, 3), np.nan)
         sigma = np.full(n, tc.meas_sigma_m)
@@ -230,12 +413,13 @@ class TrackEstimator:
         sm = rts_smooth(t_s[seg], z[seg], sigma[seg], cfg.smoothing.accel_psd, tc.init_speed_sigma)
         pos = np.zeros((n, 3))
         var = np.zeros(n)
-        pos[seg] = sm.position
+        # the smoother's states are at the points' time: move them back to the stamps
+        pos[seg] = sm.position - sm.velocity * self._offset_s
         var[seg] = sm.pos_var
         q = cfg.smoothing.accel_psd
         for f in list(range(first)) + list(range(last + 1, n)):
             k_end = 0 if f < first else -1
-            dt = t_s[f] - t_s[first if f < first else last]
+            dt = t_s[f] - t_s[first if f < first else last] - self._offset_s
             pos[f], var[f] = extrapolate(
                 sm.position[k_end],
                 sm.velocity[k_end],
@@ -265,7 +449,7 @@ class TrackEstimator:
             )
         events.extend(_gap_events(stamps, t_s, have, raw, first, last, chain))
         events.sort(key=lambda e: e.stamp_ns)
-        return SequenceEstimate(tuple(estimates), chosen, tuple(events))
+        return SequenceEstimate(tuple(estimates), chosen, tuple(events), causal)
 
 
 def _gap_events(
@@ -332,11 +516,13 @@ def make_estimator(config: CldetConfig) -> Estimator:
 
 
 def estimate_sequence(
-    frames: Callable[[], Iterable[LidarFrame]], config: CldetConfig
+    frames: Callable[[], Iterable[LidarFrame]] | Iterable[LidarFrame], config: CldetConfig
 ) -> tuple[list[FrameDetections], SequenceEstimate]:
-    """Run both passes over a re-iterable frame source (``frames()`` is called twice), then finish."""
+    """Register every frame of a sequence (one pass, in stamp order), then refine.
+
+    ``frames`` is an iterable of frames, or a callable returning one (called once).
+    """
     estimator = make_estimator(config)
-    for frame in frames():
-        estimator.observe(frame)
-    detections = [estimator.process(frame) for frame in frames()]
-    return detections, estimator.finish()
+    source = frames() if callable(frames) else frames
+    detections = [estimator.register_frame(frame) for frame in source]
+    return detections, estimator.refine()

@@ -7,31 +7,22 @@ each detection weighted by per-detection evidence and the track's factors:
 * size: a detection whose cluster box is larger than ``max_size_m`` (1.2 m; the largest
   drones are ~0.8 m) weighs 0.1 (a person, a car, a branch);
 * height: a detection weighs 1 when its lowest point is at least ``min_height_m`` (2 m) above
-  the ground, falling linearly to 0.1 at 1 m lower: whatever the LiDAR sees of a walking
-  person lies below ~2 m (far away only the head and shoulders are hit), while the drone flies
-  higher nearly all the time (but may come down to a person's height). A cluster whose lowest
-  point lies within ``fov_cut_m`` (0.3 m) of the bottom of the Mid-360's field of view at its
-  horizontal distance h (z = tan(``fov_bottom_deg``) * h in the sensor frame; -7.3 deg on the
-  real data) may extend below what is seen, so it counts as reaching the ground: a person
-  walking close past the sensor shows only the upper body (lowest visible point ~1.2 m above
-  the ground, extent < 1.2 m), like a small object floating at head height. A drone that low
-  and that close to the sensor weighed only 0.1 to ~0.4 anyway. Likewise a cluster whose
-  continuation one cell below is hidden by the background (``BackgroundModel.hidden_below``:
-  farther out, the ground seen at a grazing angle swallows everything below about the sensor's
-  height, so a walking person shows only head and shoulders) counts as reaching the ground;
+  the local ground (``cldet.core.ground``: a fitted plane and height map, so a tilted sensor,
+  a slope or a rooftop change nothing), falling linearly to 0.1 at 1 m lower: whatever the
+  LiDAR sees of a walking person lies below ~2 m, while the drone flies higher nearly all the
+  time (but may come down to a person's height). The estimator sets the height to 0 for a
+  cluster that may continue below what is seen: one cut by the bottom of the Mid-360's field of
+  view, or whose continuation one cell below is hidden by the ground's background margin (a
+  person far out shows only head and shoulders). Unknown height (no ground fitted) weighs 1;
 * raw: a detection from the raw-point gate (no cluster) weighs ``raw_weight`` (0.5);
 * speed: factor 0.1 when the track's 90th-percentile filtered speed exceeds ``max_speed``
-  (15 m/s); above ``cruise_speed`` (8 m/s: survey and filming flights are slower; a crossing
-  bird is faster) the median speed lowers the factor linearly to 0.3 at ``max_speed``;
-  factor 0.3 when 90 % of its detections lie within ``static_spread_m`` (0.5 m) of their median
-  (sparse returns from different parts of one object scatter its centroid), or when they
-  scatter less than 2 m but a least-squares constant-velocity fit moves them less than
-  ``static_spread_m`` over the track's span (a swaying or flickering clump far away, whose
-  sparse centroid jumps by half a metre frame to frame but goes nowhere): static clutter (a
-  lamp head, a leaf clump), or a drone hovering the whole time (kept when nothing else is
-  there, but a real mover wins). Not high in the Avia cone (median elevation at least the
-  background's ``floating_any_range_above_deg``, 50 deg): the sky there holds no small static
-  things, so a track hovering there is a drone;
+  (30 m/s: DJI drones cruise at 15-23 m/s, so speed alone never makes a drone a bird);
+* static: factor 0.3 when 90 % of its detections lie within ``static_spread_m`` (0.5 m) of
+  their median (sparse returns from different parts of one object scatter its centroid), or
+  when they scatter less than 2 m but a least-squares constant-velocity fit moves them less
+  than ``static_spread_m`` over the track's span (a swaying or flickering clump far away):
+  static clutter, or a drone hovering the whole time (kept when nothing else is there, but a
+  real mover wins). This holds at every elevation: nothing assumes an open sky;
 * motion consistency: a detection whose NIS exceeds 7.81 (the 95 % point of chi^2, 3 dof)
   weighs exp(-(NIS - 7.81) / 7.81): smooth motion keeps its weight, erratic speckle or a
   bird's jinks lose it;
@@ -56,8 +47,9 @@ from numpy.typing import NDArray
 from cldet.config import TrackingConfig
 from cldet.core.tracking import ClusterTable, TrackRecord
 
-__all__ = ["ScoredTrack", "score_tracks", "select_chain"]
+__all__ = ["ScoredTrack", "detection_weights", "score_tracks", "select_chain"]
 
+STATIC_FACTOR = 0.3  # score factor of a track that goes nowhere
 _LINK_COST = 2.0
 _NIS95 = 7.81  # 95 % point of chi^2 with 3 degrees of freedom
 _JITTER_M = 2.0  # a track scattered less than this that goes nowhere is static clutter
@@ -84,19 +76,37 @@ def _net_motion(t: NDArray[np.float64], pos: NDArray[np.float64]) -> float:
     return float(np.linalg.norm(velocity)) * span
 
 
+def detection_weights(
+    extent: NDArray[np.float64],
+    height: NDArray[np.float64],
+    raw: NDArray[np.bool_],
+    nis: NDArray[np.float64],
+    cfg: TrackingConfig,
+) -> NDArray[np.float64]:
+    """Per-detection evidence: size, height above the local ground, raw gate, motion consistency.
+
+    Args: (H,) cluster box extent (m), lowest point's height above the local ground (m, NaN
+    unknown), from the raw gate, normalised innovation squared (NaN at a track's birth).
+    """
+    per_det = np.where(extent <= cfg.max_size_m, 1.0, 0.1)
+    lo_h, hi_h = cfg.min_height_m - 1.0, cfg.min_height_m
+    with np.errstate(invalid="ignore"):
+        height_w = np.clip((height - lo_h) / (hi_h - lo_h), 0.1, 1.0)
+    per_det *= np.where(np.isfinite(height), height_w, 1.0)
+    per_det *= np.where(raw, cfg.raw_weight, 1.0)
+    # motion consistency: a detection far outside the constant-velocity prediction
+    # (NIS above the 95 % point of chi^2 with 3 dof) is down-weighted smoothly
+    nis0 = np.nan_to_num(nis, nan=0.0)
+    return per_det * np.exp(-np.maximum(nis0 - _NIS95, 0.0) / _NIS95)
+
+
 def score_tracks(
     records: list[TrackRecord],
     tables: list[ClusterTable],
     times_s: NDArray[np.float64],
-    ground_z: float,
     cfg: TrackingConfig,
-    free_sky_deg: float = 90.0,
 ) -> list[ScoredTrack]:
-    """Score every candidate track of two detections or more (see the module docstring).
-
-    ``free_sky_deg``: a static track whose median elevation is at least this is not
-    penalised (the background's ``floating_any_range_above_deg``).
-    """
+    """Score every candidate track of two detections or more (see the module docstring)."""
     out = []
     for rec in records:
         h = len(rec.frames)
@@ -105,42 +115,24 @@ def score_tracks(
         pos = rec.positions
         raw = rec.raw
         extent = np.zeros(h)
-        low = pos[:, 2].copy()
+        height = np.full(h, np.nan)
         both = np.zeros(h, dtype=bool)
         for k in np.flatnonzero(~raw):
             table, c = tables[rec.frames[k]], rec.clusters[k]
             extent[k] = table.extent[c]
-            low[k] = table.low_z()[c]
+            height[k] = table.heights()[c]
             both[k] = table.n_mid360[c] > 0 and table.n_avia[c] > 0
-        per_det = np.where(extent <= cfg.max_size_m, 1.0, 0.1)
-        if cfg.fov_cut_m > 0:
-            # cut by the bottom of the field of view: it may reach down to the ground
-            horiz = np.hypot(pos[:, 0], pos[:, 1])
-            z_fov = np.tan(np.radians(cfg.fov_bottom_deg)) * horiz
-            low = np.where(low <= z_fov + cfg.fov_cut_m, ground_z, low)
-        lo_h, hi_h = cfg.min_height_m - 1.0, cfg.min_height_m
-        per_det *= np.clip((low - ground_z - lo_h) / (hi_h - lo_h), 0.1, 1.0)
-        per_det *= np.where(raw, cfg.raw_weight, 1.0)
-        # motion consistency: a detection far outside the constant-velocity prediction
-        # (NIS above the 95 % point of chi^2 with 3 dof) is down-weighted smoothly
-        nis = np.nan_to_num(rec.nis, nan=0.0)
-        per_det *= np.exp(-np.maximum(nis - _NIS95, 0.0) / _NIS95)
+        per_det = detection_weights(extent, height, raw, rec.nis, cfg)
         factor = 1.0
         speeds = rec.speed[2:] if h > 3 else rec.speed[1:]
-        if len(speeds):
-            v = float(np.median(speeds))
-            if np.percentile(speeds, 90) > cfg.max_speed:
-                factor *= 0.1
-            elif v > cfg.cruise_speed:
-                factor *= 1.0 - 0.7 * (v - cfg.cruise_speed) / (cfg.max_speed - cfg.cruise_speed)
+        if len(speeds) and np.percentile(speeds, 90) > cfg.max_speed:
+            factor *= 0.1
         centre = np.median(pos, axis=0)
         spread = float(np.percentile(np.linalg.norm(pos - centre, axis=1), 90))
-        elevation = np.degrees(np.arctan2(centre[2], np.hypot(centre[0], centre[1])))
-        if elevation < free_sky_deg and (
-            spread < cfg.static_spread_m
-            or (spread < _JITTER_M and _net_motion(times_s[rec.frames], pos) < cfg.static_spread_m)
+        if spread < cfg.static_spread_m or (
+            spread < _JITTER_M and _net_motion(times_s[rec.frames], pos) < cfg.static_spread_m
         ):
-            factor *= 0.3
+            factor *= STATIC_FACTOR
         factor *= 1.0 + 0.5 * float(np.mean(both))
         contribution = per_det * factor
         contribution[0] = 0.0  # a track's first detection is no evidence of persistence

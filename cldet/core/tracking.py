@@ -35,7 +35,7 @@ from scipy.optimize import linear_sum_assignment
 from cldet.config import TrackingConfig
 from cldet.types import Cluster
 
-__all__ = ["CandidateTracker", "ClusterTable", "TrackRecord"]
+__all__ = ["ActiveTracks", "CandidateTracker", "ClusterTable", "TrackRecord"]
 
 
 @dataclass(frozen=True)
@@ -47,11 +47,11 @@ class ClusterTable:
     n_points: NDArray[np.int64]  # (K,)
     n_mid360: NDArray[np.int64]  # (K,)
     n_avia: NDArray[np.int64]  # (K,)
-    lower_z: NDArray[np.float64] | None = None  # (K,) lowest point, metres (None: centroid z)
+    height: NDArray[np.float64] | None = None  # (K,) lowest point above local ground, m; NaN unknown
 
-    def low_z(self) -> NDArray[np.float64]:
-        """(K,) z of each cluster's lowest point (its centroid z when unknown)."""
-        return self.centroid[:, 2] if self.lower_z is None else self.lower_z
+    def heights(self) -> NDArray[np.float64]:
+        """(K,) each cluster's height above the local ground, metres (NaN: unknown)."""
+        return np.full(len(self), np.nan) if self.height is None else self.height
 
     @staticmethod
     def from_clusters(clusters: tuple[Cluster, ...]) -> ClusterTable:
@@ -59,14 +59,13 @@ class ClusterTable:
         k = len(clusters)
         if k == 0:
             z = np.zeros(0, dtype=np.int64)
-            return ClusterTable(np.zeros((0, 3)), np.zeros(0), z, z, z, np.zeros(0))
+            return ClusterTable(np.zeros((0, 3)), np.zeros(0), z, z, z)
         return ClusterTable(
             centroid=np.array([c.centroid for c in clusters], dtype=np.float64),
             extent=np.array([float(np.max(c.upper - c.lower)) for c in clusters]),
             n_points=np.array([c.n_points for c in clusters], dtype=np.int64),
             n_mid360=np.array([c.n_mid360 for c in clusters], dtype=np.int64),
             n_avia=np.array([c.n_avia for c in clusters], dtype=np.int64),
-            lower_z=np.array([float(c.lower[2]) for c in clusters]),
         )
 
     def __len__(self) -> int:
@@ -89,6 +88,17 @@ class TrackRecord:
     def raw(self) -> NDArray[np.bool_]:
         """(H,) the detection came from the raw-point gate, not from a foreground cluster."""
         return self.clusters < 0
+
+
+@dataclass(frozen=True)
+class ActiveTracks:
+    """The active candidate tracks' Kalman states (per axis: position, velocity)."""
+
+    ids: NDArray[np.int64]  # (T,)
+    position: NDArray[np.float64]  # (T,3) metres, at the last step's time
+    velocity: NDArray[np.float64]  # (T,3) m/s
+    pos_var: NDArray[np.float64]  # (T,) per-axis position variance, m^2
+    last_t_s: NDArray[np.float64]  # (T,) time of each track's last detection, s
 
 
 @dataclass
@@ -153,11 +163,14 @@ class CandidateTracker:
         t_s: float,
         table: ClusterTable,
         raw_points: NDArray[np.floating] | None = None,
-    ) -> None:
+    ) -> NDArray[np.int64]:
         """Predict every active track to ``t_s`` seconds and associate this frame's clusters.
 
         ``raw_points`` (N,3), all of the frame's points (background included), let a confirmed
         moving track that got no cluster continue on raw points near its prediction.
+
+        Returns:
+            (K,) the id of the track each cluster of ``table`` joined or started.
         """
         cfg = self.cfg
         if self._t is not None and len(self._ids):
@@ -177,6 +190,7 @@ class CandidateTracker:
         assigned = np.zeros(k, dtype=bool)
         n_tr = len(self._ids)
         updated = np.zeros(n_tr, dtype=bool)
+        owner = np.full(k, -1, dtype=np.int64)
         if n_tr and k:
             diff = z[None, :, :] - self._x[:, None, :, 0]  # (T,K,3)
             d2 = np.einsum("tkd,tkd->tk", diff, diff)
@@ -208,6 +222,7 @@ class CandidateTracker:
                         )
                     assigned[cols] = True
                     updated[rows] = True
+                    owner[cols] = self._ids[rows]
         if raw_points is not None and len(raw_points) and n_tr and not updated.all():
             self._raw_continue(frame_index, t_s, np.flatnonzero(~updated), raw_points)
         new = np.flatnonzero(~assigned)
@@ -234,6 +249,8 @@ class CandidateTracker:
             self._P = np.concatenate([self._P, P])
             self._last_t = np.concatenate([self._last_t, np.full(m, t_s)])
             self._ids = np.concatenate([self._ids, ids])
+            owner[new] = ids
+        return owner
 
     def _raw_continue(
         self, frame_index: int, t_s: float, missed: NDArray[np.int64], raw: NDArray[np.floating]
@@ -271,20 +288,49 @@ class CandidateTracker:
                 hits.add(frame_index, -1, zr, n_in, nis, float(np.linalg.norm(self._x[i, :, 1])))
                 break
 
+    def active(self) -> ActiveTracks:
+        """The active tracks' filtered states at the last ``step``."""
+        return ActiveTracks(
+            ids=self._ids.copy(),
+            position=self._x[:, :, 0].copy(),
+            velocity=self._x[:, :, 1].copy(),
+            pos_var=self._P[:, 0, 0].copy(),
+            last_t_s=self._last_t.copy(),
+        )
+
+    def is_confirmed_mover(self, track_id: int) -> bool:
+        """Enough cluster hits, drone-sized, and it has moved (the raw-gate criterion)."""
+        cfg = self.cfg
+        hits = self._hits.get(track_id)
+        return hits is not None and hits.may_use_raw(
+            cfg.raw_min_cluster_hits, cfg.raw_min_spread_m, cfg.max_size_m
+        )
+
+    def last_hit(self, track_id: int) -> tuple[int, int, NDArray[np.float64], float]:
+        """A track's latest detection: frame index, cluster index (-1: raw gate), position, NIS."""
+        hits = self._hits[track_id]
+        return hits.frames[-1], hits.clusters[-1], hits.positions[-1], hits.nis[-1]
+
+    def record(self, track_id: int) -> TrackRecord:
+        """One candidate track's detections so far."""
+        return _to_record(track_id, self._hits[track_id])
+
     def records(self) -> list[TrackRecord]:
         """Every candidate track so far (ended or active), by track id."""
-        return [
-            TrackRecord(
-                track_id=tid,
-                frames=np.asarray(h.frames, dtype=np.int64),
-                clusters=np.asarray(h.clusters, dtype=np.int64),
-                positions=np.asarray(h.positions, dtype=np.float64).reshape(-1, 3),
-                n_points=np.asarray(h.n_points, dtype=np.int64),
-                nis=np.asarray(h.nis, dtype=np.float64),
-                speed=np.asarray(h.speed, dtype=np.float64),
-            )
-            for tid, h in sorted(self._hits.items())
-        ]
+        return [_to_record(tid, h) for tid, h in sorted(self._hits.items())]
+
+
+def _to_record(tid: int, h: _Hits) -> TrackRecord:
+    """A track's hits as arrays."""
+    return TrackRecord(
+        track_id=tid,
+        frames=np.asarray(h.frames, dtype=np.int64),
+        clusters=np.asarray(h.clusters, dtype=np.int64),
+        positions=np.asarray(h.positions, dtype=np.float64).reshape(-1, 3),
+        n_points=np.asarray(h.n_points, dtype=np.int64),
+        nis=np.asarray(h.nis, dtype=np.float64),
+        speed=np.asarray(h.speed, dtype=np.float64),
+    )
 
 
 @numba.njit(cache=True)

@@ -31,7 +31,8 @@ MODALITY_TOPICS: Final[dict[str, str]] = {
 CLOUD_TOPICS: Final = (LIDAR_360, LIVOX_AVIA, RADAR)
 
 # --- result channels (written by `cldet annotate`) -----------------------------------------
-ESTIMATE: Final = "/cldet/estimate"  # cldet.Estimate, one per Mid-360 frame
+ESTIMATE: Final = "/cldet/estimate"  # cldet.Estimate, one per Mid-360 frame (refined track)
+CAUSAL: Final = "/cldet/causal"  # cldet.Estimate, the causal estimate as it was made per frame
 POSE: Final = "/cldet/pose"  # foxglove.PoseInFrame, drawn by both viewers
 TRAJECTORY: Final = "/cldet/trajectory"  # foxglove.PosesInFrame, the track so far
 FOREGROUND: Final = "/cldet/foreground"  # foxglove.PointCloud x,y,z,cluster_id

@@ -1,0 +1,133 @@
+"""The ground under the sensor: a fitted plane plus a coarse height map, from static returns.
+
+Height reasoning ("a person stands on the ground, a drone flies") must hold with a tilted
+sensor, on a slope, on a rooftop. So nothing assumes a level sensor or one ground height:
+
+1. **Plane.** RANSAC over static points (a frame's returns that are core background): the plane with the most inliers (within ``_INLIER_M``) among those that
+   pass below the sensor (at least ``_MIN_CLEARANCE_M`` under the origin) and whose normal is
+   within ``max_tilt_deg`` of the sensor's +z axis (a sensor tilted up to 20 deg on ground
+   sloped up to 10 deg). Its normal, pointing away from the ground towards the sensor, is "up".
+   On a rooftop the roof is the plane; on a hillside, the slope.
+2. **Height map.** Every static point's height above that plane goes into a horizontal grid of
+   ``_CELL_M`` (2 m) cells in the plane's own coordinates; a cell keeps its lowest height. The
+   local ground under a query point is the lowest cell within one cell of it (walls and roofs
+   whose foot is hidden do not raise it; the street below a roof edge lowers it), and the plane
+   itself (height 0) where no static return was seen.
+
+``height_above(points)`` is then the height of each point above the local ground, metres.
+Before the first fit (the background's warm-up) heights are NaN: unknown, never guessed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+__all__ = ["GroundModel"]
+
+_INLIER_M = 0.15  # a point this close to a candidate plane supports it
+_MIN_CLEARANCE_M = 0.2  # the ground passes at least this far below the sensor
+_CELL_M = 2.0  # height-map cell, metres
+_HALF_EXTENT_M = 120.0  # the height map covers this far from the sensor, each way
+_ITERATIONS = 64
+_MAX_POINTS = 4000  # RANSAC subsample
+
+
+class GroundModel:
+    """Ground plane and height map, refitted from static points; ``height_above`` queries it."""
+
+    def __init__(self, max_tilt_deg: float = 35.0, seed: int = 0) -> None:
+        self.max_tilt_deg = max_tilt_deg
+        self._rng = np.random.default_rng(seed)
+        self.normal: NDArray[np.float64] | None = None  # (3,) unit "up", sensor frame
+        self.offset = 0.0  # height of the sensor origin above the plane, metres
+        n = int(round(2 * _HALF_EXTENT_M / _CELL_M))
+        self._n = n
+        self._map = np.full((n, n), np.inf)
+        self._axes = np.eye(3)[:2]  # (2,3) in-plane axes for the map
+
+    @property
+    def fitted(self) -> bool:
+        """A plane has been found."""
+        return self.normal is not None
+
+    def fit(self, points: NDArray[np.floating]) -> bool:
+        """Refit plane and height map from static points (N,3), metres, sensor frame.
+
+        Returns whether a plane was found; the previous fit is kept otherwise.
+        """
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        p = p[np.all(np.isfinite(p), axis=1)]
+        if len(p) < 3:
+            return False
+        sample = p if len(p) <= _MAX_POINTS else p[self._rng.choice(len(p), _MAX_POINTS, False)]
+        cos_max = np.cos(np.radians(self.max_tilt_deg))
+        # candidate planes from random triples, evaluated together
+        idx = self._rng.integers(0, len(sample), (_ITERATIONS, 3))
+        a, b, c = sample[idx[:, 0]], sample[idx[:, 1]], sample[idx[:, 2]]
+        n = np.cross(b - a, c - a)
+        norm = np.linalg.norm(n, axis=1)
+        ok = norm > 1e-9
+        n[ok] /= norm[ok, None]
+        n *= np.where(n[:, 2] < 0, -1.0, 1.0)[:, None]  # point up, towards the sensor side
+        d = -np.einsum("ij,ij->i", n, a)  # plane: n.x + d = 0; sensor height above it = d
+        ok &= (n[:, 2] >= cos_max) & (d >= _MIN_CLEARANCE_M)
+        if not ok.any():
+            return False
+        n, d = n[ok], d[ok]
+        dist = np.abs(sample @ n.T + d)  # (S, C)
+        support = np.sum(dist < _INLIER_M, axis=0)
+        best = int(np.argmax(support))
+        if support[best] < 3:
+            return False
+        # refine by least squares on the inliers
+        inl = sample[dist[:, best] < _INLIER_M]
+        centre = inl.mean(axis=0)
+        _, _, vt = np.linalg.svd(inl - centre, full_matrices=False)
+        normal = vt[-1] * (1.0 if vt[-1][2] >= 0 else -1.0)
+        offset = -float(normal @ centre)
+        if normal[2] < cos_max or offset < _MIN_CLEARANCE_M:
+            normal, offset = n[best], float(d[best])
+        self.normal = normal
+        self.offset = offset
+        ax = np.cross(normal, [0.0, 1.0, 0.0])
+        if np.linalg.norm(ax) < 1e-6:
+            ax = np.cross(normal, [1.0, 0.0, 0.0])
+        ax /= np.linalg.norm(ax)
+        self._axes = np.stack([ax, np.cross(normal, ax)])
+        height = p @ normal + offset
+        i, j, inside = self._cells(p)
+        grid = np.full(self._n * self._n, np.inf)
+        np.minimum.at(grid, i[inside] * self._n + j[inside], height[inside])
+        # the local ground of a cell: the lowest height within one cell of it
+        self._map = ndimage.minimum_filter(grid.reshape(self._n, self._n), size=3, mode="nearest")
+        return True
+
+    def _cells(
+        self, p: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:
+        uv = p @ self._axes.T
+        ij = np.floor((uv + _HALF_EXTENT_M) / _CELL_M).astype(np.int64)
+        inside = np.all((ij >= 0) & (ij < self._n), axis=1)
+        return ij[:, 0], ij[:, 1], inside
+
+    def plane_height(self, points: NDArray[np.floating]) -> NDArray[np.float64]:
+        """Height of each point (N,3) above the ground plane, metres (NaN before a fit)."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if self.normal is None:
+            return np.full(len(p), np.nan)
+        return p @ self.normal + self.offset
+
+    def height_above(self, points: NDArray[np.floating]) -> NDArray[np.float64]:
+        """Height of each point (N,3) above the local ground, metres (NaN before a fit)."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        h = self.plane_height(p)
+        if self.normal is None or len(p) == 0:
+            return h
+        i, j, inside = self._cells(p)
+        local = np.zeros(len(p))
+        local[inside] = self._map[i[inside], j[inside]]
+        local[~np.isfinite(local)] = 0.0  # nothing static seen there: the plane
+        # a point below everything static around it stands on what it is (height 0 at least)
+        return h - np.minimum(local, h)

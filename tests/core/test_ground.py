@@ -1,0 +1,67 @@
+"""Tests of the ground model: tilted sensors, slopes and rooftops, from static points."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cldet.core.ground import GroundModel
+
+
+def _rotation(tilt_deg: float, axis_deg: float) -> np.ndarray:
+    """Rotation by ``tilt_deg`` about a horizontal axis at azimuth ``axis_deg``."""
+    a = np.radians(axis_deg)
+    k = np.array([np.cos(a), np.sin(a), 0.0])
+    t = np.radians(tilt_deg)
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(t) * kx + (1 - np.cos(t)) * kx @ kx
+
+
+def _ground(rng: np.random.Generator, height_m: float, n: int = 3000) -> np.ndarray:
+    """Points on level ground ``height_m`` below a level sensor, out to 30 m, plus a wall."""
+    r = np.sqrt(rng.uniform(1.0, 900.0, n))
+    az = rng.uniform(-np.pi, np.pi, n)
+    ground = np.stack([r * np.cos(az), r * np.sin(az), np.full(n, -height_m)], axis=1)
+    wall = np.stack(
+        [np.full(400, 8.0), rng.uniform(-5, 5, 400), rng.uniform(-height_m, 4.0, 400)], axis=1
+    )
+    return np.concatenate([ground, wall]) + rng.normal(0, 0.02, (n + 400, 3))
+
+
+@pytest.mark.parametrize(("tilt", "height"), [(0.0, 1.5), (8.0, 1.0), (15.0, 3.0), (20.0, 5.0)])
+def test_the_plane_is_found_under_a_tilted_sensor(tilt: float, height: float) -> None:
+    rng = np.random.default_rng(int(tilt))
+    rot = _rotation(tilt, 30.0)
+    pts = _ground(rng, height) @ rot.T  # what the tilted sensor sees, in its own frame
+    model = GroundModel()
+    assert not model.fitted
+    assert np.isnan(model.height_above(np.zeros((1, 3)))).all()
+    assert model.fit(pts)
+    assert model.normal is not None
+    up_in_sensor = rot @ np.array([0.0, 0.0, 1.0])
+    assert np.degrees(np.arccos(model.normal @ up_in_sensor)) < 1.0
+    assert model.offset == pytest.approx(height, abs=0.05)
+    # a point 2 m above the ground at 10 m, and a person's foot on it
+    probe = np.array([[10.0, 0.0, 2.0 - height], [5.0, 5.0, -height]]) @ rot.T
+    np.testing.assert_allclose(model.height_above(probe), [2.0, 0.0], atol=0.1)
+
+
+def test_the_street_below_a_roof_edge_is_the_local_ground() -> None:
+    # a sensor 1 m above a roof that ends 6 m away; the street lies 10 m lower beyond it
+    rng = np.random.default_rng(3)
+    roof = np.stack([rng.uniform(-6, 6, 3000), rng.uniform(-6, 6, 3000), np.full(3000, -1.0)], 1)
+    street = np.stack([rng.uniform(10, 30, 600), rng.uniform(-20, 20, 600), np.full(600, -11.0)], 1)
+    model = GroundModel()
+    assert model.fit(np.concatenate([roof, street]))
+    assert model.offset == pytest.approx(1.0, abs=0.05)  # the roof is the plane
+    # a drone 3 m above the street 20 m out is 13 m above the local ground, not 3 m below 0
+    h = model.height_above(np.array([[20.0, 0.0, -8.0], [2.0, 2.0, 0.5]]))
+    np.testing.assert_allclose(h, [3.0, 1.5], atol=0.1)
+
+
+def test_no_plane_from_points_above_the_sensor_only() -> None:
+    rng = np.random.default_rng(4)
+    model = GroundModel()
+    assert not model.fit(rng.uniform([-5, -5, 1], [5, 5, 3], (500, 3)))
+    assert not model.fit(np.zeros((2, 3)))
+    assert not model.fitted
