@@ -21,5 +21,8 @@ from cldet.commands._app import app
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of the ``cldet`` console script."""
+    """Entry point of the ``cldet`` console script (SIGTERM is handled like Ctrl-C)."""
+    from cldet.signals import raise_on_sigterm
+
+    raise_on_sigterm()
     app(args=argv if argv is not None else sys.argv[1:], prog_name="cldet")

@@ -23,9 +23,7 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 import re
-import tempfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cldet.errors import CldetError, OutputExistsError, ResultsError
+from cldet.io.files import atomic_path, resolve_link
 from cldet.stamps import parse_stamp
 
 RESULTS_COLUMNS: tuple[str, ...] = ("Sequence", "Timestamp", "Position", "Classification")
@@ -344,7 +343,8 @@ def read_truth(path: Path | str) -> TruthTable:
 def write_atomic(path: Path | str, write: Callable[[Path], None], *, overwrite: bool) -> None:
     """Create ``path`` through a temporary file in the same folder, renamed into place at the end.
 
-    A crash or error never leaves a partial file and never damages an existing one.
+    A crash or error never leaves a partial file and never damages an existing one; see
+    :func:`cldet.io.files.atomic_path` (mode from the umask, fsync, stale temporaries removed).
 
     Args:
         path: the output file; its folder must exist.
@@ -360,23 +360,13 @@ def write_atomic(path: Path | str, write: Callable[[Path], None], *, overwrite: 
         raise OutputExistsError(
             f"{target} already exists: pass overwrite (--overwrite) to replace it"
         )
-    if not target.parent.is_dir():
+    if not resolve_link(target).parent.is_dir():
         raise ResultsError(f"{target}: the folder {target.parent} does not exist")
     try:
-        fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+        with atomic_path(target, overwrite=overwrite) as tmp:
+            write(tmp)
     except OSError as err:
-        raise ResultsError(f"{target}: cannot write in {target.parent}: {err}") from err
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        write(tmp)
-        os.replace(tmp, target)
-    except OSError as err:
-        tmp.unlink(missing_ok=True)
-        raise ResultsError(f"{target}: cannot write: {err}") from err
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+        raise ResultsError(f"{target}: cannot write: {err.strerror or err}") from err
 
 
 def write_results(path: Path | str, rows: Iterable[ResultRow], *, overwrite: bool = False) -> None:

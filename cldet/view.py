@@ -21,7 +21,6 @@ Per-frame clouds are buffered and sent as columns every few dozen frames: far ch
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
@@ -29,6 +28,7 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from cldet.io.files import commit, remove_stale_temporaries, resolve_link, temporary_path
 from cldet.types import Estimate, LidarFrame, Source
 
 if TYPE_CHECKING:
@@ -156,7 +156,10 @@ class RerunView:
         import rerun.blueprint as rrb
 
         self.path = path
-        self._tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+        target = resolve_link(path)  # a link is kept: the file it points to is replaced
+        remove_stale_temporaries(target.parent)
+        self._target = target
+        self._tmp = temporary_path(target)
         self._rec = rr.RecordingStream("cldet", recording_id=recording_id)  # None: a fresh id
         blueprint = rrb.Blueprint(
             rrb.Horizontal(
@@ -345,7 +348,11 @@ class RerunView:
             self._rec.flush()
             self._rec.disconnect()
             self._closed = True
-            os.replace(self._tmp, self.path)
+            try:
+                commit(self._tmp, self._target)  # fsync, the umask's mode, rename
+            except BaseException:
+                self._tmp.unlink(missing_ok=True)
+                raise
         return self.path
 
     def abort(self) -> None:

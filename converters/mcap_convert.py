@@ -29,6 +29,7 @@ from cldet.errors import CldetError, DatasetError, LogError
 from cldet.io import topics
 from cldet.io.mcap_write import Compression, LogWriter, atomic_output
 from cldet.progress import NullProgress, Progress
+from cldet.signals import init_worker, stop_workers
 from cldet.stamps import format_stamp
 from cldet.types import ClassSample, Cloud, ImageFrame, PositionSample
 from converters import mmaud
@@ -269,9 +270,10 @@ class _ProgressLedger:
 _worker_queue: Any = None
 
 
-def _init_worker(queue: Any) -> None:
+def _init_worker(queue: Any, parent_pid: int) -> None:
     global _worker_queue
     _worker_queue = queue
+    init_worker(parent_pid)  # SIGTERM cleans up; the worker stops when the run's process dies
 
 
 def _worker(job: _Job) -> _Outcome:
@@ -326,7 +328,10 @@ def _run_parallel(
         ctx = mp.get_context("spawn")
     queue = ctx.Queue()
     executor = ProcessPoolExecutor(
-        max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(queue,)
+        max_workers=workers,
+        mp_context=ctx,
+        initializer=_init_worker,
+        initargs=(queue, os.getpid()),
     )
     ledger = _ProgressLedger(progress)
     try:
@@ -342,9 +347,12 @@ def _run_parallel(
         raise CldetError(
             f"a conversion worker process died ({err}); was it killed, or out of memory?"
         ) from err
+    except BaseException:
+        # Ctrl-C, SIGTERM or an unexpected error: stop the running workers (they remove their
+        # temporary files) rather than wait for their sequences to finish.
+        stop_workers(executor)
+        raise
     finally:
-        # On Ctrl-C or an unexpected error: cancel what has not started and wait for the
-        # running workers, which remove their temporary files themselves.
         executor.shutdown(wait=True, cancel_futures=True)
         queue.close()
         queue.join_thread()

@@ -168,3 +168,64 @@ def test_annotate_a_lidar_channel_without_messages(
         f"{path}: no message on its /lidar_360 channel, nothing to annotate; "
         "topics in the log: /lidar_360 (0)",
     )
+
+
+# --- read-only logs, links, two runs at once -----------------------------------------------------
+@pytest.fixture
+def fake_annotate(monkeypatch: pytest.MonkeyPatch) -> list[Path]:
+    """annotate_log replaced by a plain rewrite of the log (the file handling under test only)."""
+    from cldet import pipeline
+    from cldet.io.rewrite import rewrite_log
+
+    calls: list[Path] = []
+
+    def rewrite(log: Path, *, output: Path | None = None, **kwargs: object) -> object:
+        calls.append(Path(log))
+        rewrite_log(Path(log), Path(output) if output is not None else Path(log), [])
+
+        class Report:
+            def describe(self) -> str:
+                return f"rewrote {log}"
+
+        return Report()
+
+    monkeypatch.setattr(pipeline, "annotate_log", rewrite)
+    return calls
+
+
+def test_a_read_only_log_is_refused_unless_forced(
+    cli: Callable[..., Result], log: Path, fake_annotate: list[Path]
+) -> None:
+    log.chmod(0o444)
+    before = log.read_bytes()
+    result = cli("annotate", log, "--no-rrd")
+    assert_one_error(result, f"{log} is read-only (mode 0444): pass --force to rewrite it")
+    assert log.read_bytes() == before and fake_annotate == []
+    result = cli("annotate", log, "--no-rrd", "--force")
+    assert result.exit_code == 0, result.output
+    assert fake_annotate == [log] and (log.stat().st_mode & 0o777) == 0o444
+
+
+def test_a_symbolic_link_is_annotated_at_its_target(
+    cli: Callable[..., Result], log: Path, tmp_path: Path, fake_annotate: list[Path]
+) -> None:
+    link = tmp_path / "link.mcap"
+    link.symlink_to(log)
+    inode = log.stat().st_ino
+    result = cli("annotate", link, "--no-rrd")
+    assert result.exit_code == 0, result.output
+    assert link.is_symlink() and link.resolve() == log
+    assert log.stat().st_ino != inode  # the target was replaced, through the link
+
+
+def test_a_log_being_annotated_is_refused(
+    cli: Callable[..., Result], log: Path, fake_annotate: list[Path]
+) -> None:
+    from cldet.io.files import lock_file
+
+    with lock_file(log, "log"):  # as another `cldet annotate` holds it
+        result = cli("annotate", log, "--no-rrd")
+    assert_one_error(
+        result, f"the log {log} is being rewritten by another process (another `cldet annotate`?)"
+    )
+    assert fake_annotate == []

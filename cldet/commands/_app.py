@@ -54,6 +54,11 @@ def handled() -> Iterator[None]:
         echo_err(f"ERROR: {describe_os_error(err)}")
         raise typer.Exit(1) from err
     except KeyboardInterrupt as err:
+        from cldet.signals import Terminated
+
+        if isinstance(err, Terminated):
+            echo_err("terminated (SIGTERM); temporary files removed")
+            raise typer.Exit(143) from err
         echo_err("interrupted")
         raise typer.Exit(130) from err
 

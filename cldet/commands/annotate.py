@@ -56,6 +56,12 @@ def annotate(
     workers: Annotated[
         int, typer.Option(help="Logs annotated in parallel (default: all cores).")
     ] = 0,
+    force: Annotated[
+        bool,
+        typer.Option(
+            "--force", help="Rewrite a read-only log (its mode is kept). Default: refuse."
+        ),
+    ] = False,
 ) -> None:
     """Estimate the drone's 3D position at every Mid-360 frame and add the results to each log.
 
@@ -68,11 +74,15 @@ def annotate(
     A Rerun recording (clouds, foreground, clusters, estimated and true trajectories, error over
     time, track events) is written beside each log: open it with `rerun LOG.rrd`.
 
+    A log being annotated is locked: a second run on it refuses. A symbolic link is annotated
+    at its target (the link stays); a read-only log is refused unless --force. Ctrl-C and
+    SIGTERM remove the temporary files.
+
     Example: cldet annotate logs/val/*.mcap --method track
     """
     from cldet.config import load_config
     from cldet.errors import CldetError
-    from cldet.pipeline import annotate_log, annotate_logs
+    from cldet.pipeline import annotate_log_locked, annotate_logs
     from cldet.progress import BarProgress
 
     with handled():
@@ -82,8 +92,14 @@ def annotate(
             raise CldetError("-o/--output and --rrd go with exactly one log")
         with BarProgress() as bar:
             if len(logs) == 1:
-                report = annotate_log(
-                    logs[0], config=cfg, output=output, rrd=rrd, write_rrd=not no_rrd, progress=bar
+                report = annotate_log_locked(
+                    logs[0],
+                    config=cfg,
+                    output=output,
+                    rrd=rrd,
+                    write_rrd=not no_rrd,
+                    force=force,
+                    progress=bar,
                 )
                 reports, failures = [report], list[tuple[Path, str]]()
             else:
@@ -92,6 +108,7 @@ def annotate(
                     config=cfg,
                     write_rrd=not no_rrd,
                     workers=workers or os.cpu_count() or 1,
+                    force=force,
                     progress=bar,
                 )
         for report in reports:

@@ -5,19 +5,17 @@ Messages are protobuf with Foxglove's well-known schemas (plus cldet's own types
 integer nanoseconds since the Unix epoch and is written, exactly, as the message's log time, its
 publish time and its own ``timestamp`` field.
 
-:func:`atomic_output` gives the matching file discipline: write into a temporary file in the
-target folder, rename it into place only once complete, remove it on any failure.
+:func:`atomic_output` (from :mod:`cldet.io.files`) gives the matching file discipline: write into a
+temporary file in the target folder, rename it into place only once complete, remove it on any
+failure.
 """
 
 from __future__ import annotations
 
-import contextlib
 import io
-import os
 import struct
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from enum import Enum
-from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
 
@@ -42,8 +40,9 @@ from mcap.writer import Writer as McapWriter
 from numpy.typing import ArrayLike
 
 from cldet import __version__
-from cldet.errors import LogError, OutputExistsError
+from cldet.errors import LogError
 from cldet.io import topics
+from cldet.io.files import atomic_output
 from cldet.io.mcap_append import AppendPlan, AppendWriter
 from cldet.io.schemas import ClassLabel, file_descriptor_set
 from cldet.io.schemas import Estimate as EstimateMessage
@@ -485,30 +484,3 @@ class LogWriter:
         if bad:
             raise ValueError(f"metadata {name!r} values must be strings, got {bad}")
         self._mcap.add_metadata(name, dict(data))
-
-
-@contextlib.contextmanager
-def atomic_output(path: str | os.PathLike[str], *, overwrite: bool = False) -> Iterator[IO[bytes]]:
-    """Open a temporary file next to ``path`` for writing; rename it to ``path`` once complete.
-
-    The temporary file (``.<name>.tmp-<pid>`` in the same folder) is removed on any exception,
-    KeyboardInterrupt included, so a crash never leaves half a file and never touches an
-    existing ``path``.
-
-    Raises:
-        OutputExistsError: ``path`` exists and ``overwrite`` is false.
-    """
-    target = Path(path)
-    if target.exists() and not overwrite:
-        raise OutputExistsError(f"{target} exists (pass overwrite to replace it)")
-    tmp = target.with_name(f".{target.name}.tmp-{os.getpid()}")
-    done = False
-    try:
-        with open(tmp, "wb") as stream:
-            yield stream
-        os.replace(tmp, target)
-        done = True
-    finally:
-        if not done:
-            with contextlib.suppress(FileNotFoundError):
-                tmp.unlink()

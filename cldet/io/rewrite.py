@@ -16,7 +16,6 @@ then continued: the next run on it takes the fast path.
 from __future__ import annotations
 
 import contextlib
-import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,9 +24,10 @@ from typing import IO
 from mcap.records import Attachment, Channel, Message, Metadata, Schema
 
 from cldet.errors import LogError
+from cldet.io.files import atomic_output, resolve_link, temporary_path
 from cldet.io.mcap_append import AppendPlan
 from cldet.io.mcap_read import LogReader, open_log
-from cldet.io.mcap_write import Compression, LogWriter, atomic_output
+from cldet.io.mcap_write import Compression, LogWriter
 
 Addition = Callable[[LogWriter], None]
 """Writes one new message, e.g. ``lambda w: w.write_pose(topic, stamp_ns, xyz, frame)``."""
@@ -73,7 +73,7 @@ def rewrite_log(
         plan = reader.plan_append(replace_prefix, replace_metadata)
         if plan is not None:
             return _append(reader, plan, target, added, metadata or {})
-    clean = target.with_name(f".{target.name}.clean-{os.getpid()}")
+    clean = temporary_path(resolve_link(target), "clean")
     try:
         with open_log(source) as reader, atomic_output(clean, overwrite=True) as out:
             copied, dropped = _copy_without(reader, out, replace_prefix, replace_metadata)

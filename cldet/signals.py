@@ -1,0 +1,101 @@
+"""Signals and worker processes: SIGTERM ends a run like Ctrl-C, and workers never outlive it.
+
+- :func:`raise_on_sigterm` makes SIGTERM (what ``kill``, ``timeout``, systemd and Slurm send)
+  raise :class:`Terminated`, a ``KeyboardInterrupt``: every ``finally`` runs, so temporary files
+  are removed exactly as on Ctrl-C.
+- :func:`init_worker` is the initializer of every worker pool: the worker raises on SIGTERM too,
+  and stops when the process that started the run dies (even by SIGKILL), before it could rename
+  a result into place.
+- :func:`stop_workers` asks a pool's running workers to stop (on Ctrl-C or SIGTERM of the
+  parent), instead of waiting for their current job.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import os
+import signal
+import sys
+import threading
+import time
+from types import FrameType
+from typing import Any
+
+__all__ = ["Terminated", "init_worker", "pid_alive", "raise_on_sigterm", "stop_workers"]
+
+_PR_SET_PDEATHSIG = 1
+_WATCH_PERIOD_S = 0.25
+_GRACE_S = 3.0  # after SIGTERM, a worker that has not exited is ended with os._exit
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM was received; handled like Ctrl-C (temporary files removed), exit code 143."""
+
+
+def _raise_terminated(signum: int, frame: FrameType | None) -> None:
+    raise Terminated(f"terminated by signal {signal.Signals(signum).name}")
+
+
+def raise_on_sigterm() -> None:
+    """Make SIGTERM raise :class:`Terminated` in the main thread (no-op elsewhere)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _raise_terminated)
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists and has not exited (a zombie, not yet reaped, is dead)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        pass
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as stat:
+            state = stat.read().rsplit(b")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return True  # no /proc: trust kill(pid, 0)
+    return state not in (b"Z", b"X")
+
+
+def _watch_parent(parent_pid: int) -> None:
+    """In a worker: when ``parent_pid`` is gone, SIGTERM this process, then end it for sure."""
+    while pid_alive(parent_pid) and os.getppid() != 1:
+        time.sleep(_WATCH_PERIOD_S)
+    os.kill(os.getpid(), signal.SIGTERM)  # the main thread raises Terminated and cleans up
+    time.sleep(_GRACE_S)
+    os._exit(1)
+
+
+def _set_parent_death_signal() -> None:
+    """Linux: SIGTERM this process when the process that forked it dies."""
+    if not sys.platform.startswith("linux"):
+        return
+    with contextlib.suppress(OSError, AttributeError):
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+
+
+def init_worker(parent_pid: int) -> None:
+    """Initializer of a worker process of a run started by ``parent_pid``.
+
+    SIGTERM raises :class:`Terminated`; Ctrl-C is left to the parent (which stops the workers);
+    the worker stops when ``parent_pid`` dies (a watch thread, plus the kernel's parent-death
+    signal where there is one).
+    """
+    raise_on_sigterm()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _set_parent_death_signal()
+    if not pid_alive(parent_pid):
+        os._exit(1)
+    threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True).start()
+
+
+def stop_workers(executor: Any) -> None:
+    """SIGTERM every live worker of a ``ProcessPoolExecutor`` (they remove their temporary files)."""
+    processes = getattr(executor, "_processes", None) or {}
+    for process in list(processes.values()):
+        with contextlib.suppress(ProcessLookupError, OSError, AttributeError, ValueError):
+            if process.is_alive():
+                os.kill(process.pid, signal.SIGTERM)

@@ -1,0 +1,127 @@
+"""SIGTERM and SIGKILL in the middle of ``cldet convert`` (a subprocess): nothing half-done stays.
+
+After the signal and a re-run: the inputs are byte-identical, no temporary file is left, every
+log is complete, and no process of the killed run is left after 5 s.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cldet.io import list_topics
+
+pytestmark = pytest.mark.slow
+
+REPO = Path(__file__).resolve().parents[1]
+# Imported by every Python process of the run (parent, forkserver, workers): slows np.load down
+# so that the signal lands mid-run.
+SLOW_LOAD = """
+import numpy as _np
+import time as _time
+_load = _np.load
+def _slow_load(*args, **kwargs):
+    _time.sleep(0.02)
+    return _load(*args, **kwargs)
+_np.load = _slow_load
+"""
+
+
+def build(root: Path, n_seq: int = 4, n_frames: int = 60) -> None:
+    rng = np.random.default_rng(0)
+    for s in range(1, n_seq + 1):
+        folder = root / "val" / f"seq{s:04d}" / "lidar_360"
+        folder.mkdir(parents=True)
+        for i in range(n_frames):
+            np.save(folder / f"{1_706_255_621 + i // 10}.{(i % 10) * 100_000:06d}.npy",
+                    rng.normal(0, 20, (2000, 3)))  # fmt: skip
+
+
+def digest(root: Path) -> dict[str, str]:
+    return {
+        str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(root.rglob("*"))
+        if p.is_file()
+    }
+
+
+def processes_tagged(tag: str) -> list[int]:
+    """Live processes whose environment carries ``CLDET_SIGNAL_TEST=tag`` (the run's, all)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            environ = (entry / "environ").read_bytes().split(b"\0")
+            state = (entry / "stat").read_bytes().rsplit(b")", 1)[1].split()[0]
+        except (OSError, IndexError):
+            continue
+        if f"CLDET_SIGNAL_TEST={tag}".encode() in environ and state != b"Z":
+            found.append(int(entry.name))
+    return found
+
+
+def temporaries(out: Path) -> list[str]:
+    return sorted(p.name for p in out.rglob(".*") if ".tmp-" in p.name or ".clean-" in p.name)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_signal_mid_convert_leaves_nothing_behind(tmp_path: Path, sig: signal.Signals) -> None:
+    data, out, hook = tmp_path / "data", tmp_path / "logs", tmp_path / "hook"
+    build(data)
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(SLOW_LOAD)
+    before = digest(data)
+    tag = f"{os.getpid()}{sig.value}"
+    env = {**os.environ, "PYTHONPATH": f"{hook}:{REPO}", "CLDET_SIGNAL_TEST": tag}
+    command = [
+        sys.executable,
+        "-m",
+        "cldet",
+        "convert",
+        str(data),
+        "-o",
+        str(out),
+        "--workers",
+        "2",
+    ]
+    run = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 60
+    while not temporaries(out) and time.monotonic() < deadline:  # wait until writing
+        time.sleep(0.05)
+    assert temporaries(out), "the run never started writing"
+    time.sleep(0.3)
+    run.send_signal(sig)
+    run.wait(timeout=30)  # not communicate(): a surviving child would hold the pipes open
+    assert run.stderr is not None
+    err = run.stderr.read() if sig == signal.SIGTERM else b""
+    if sig == signal.SIGTERM:
+        assert run.returncode == 143, err
+        assert b"terminated (SIGTERM)" in err and b"Traceback" not in err
+        assert temporaries(out) == []  # removed by the run itself
+    else:
+        assert run.returncode == -signal.SIGKILL
+    time.sleep(5)
+    assert processes_tagged(tag) == [], "processes of the signalled run are still alive"
+    partial = [p.name for p in out.rglob("*.mcap")]
+    for log in out.rglob("*.mcap"):  # whatever is under a final name is complete
+        assert list_topics(log)["/lidar_360"] == 60, partial
+
+    again = subprocess.run(
+        [*command, "--overwrite"], env={**os.environ, "PYTHONPATH": str(REPO)},
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert again.returncode == 0, again.stderr
+    assert temporaries(out) == []  # stale ones of the killed run removed too
+    assert sorted(p.name for p in (out / "val").iterdir()) == [
+        f"seq{s:04d}.mcap" for s in range(1, 5)
+    ]
+    assert digest(data) == before
