@@ -28,6 +28,9 @@ def simulate(
     ] = Preset.small,
     seed: Annotated[int, typer.Option(help="Random seed; the same seed gives the same bytes.")] = 0,
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+    randomize: Annotated[
+        bool, typer.Option(help="Randomised worlds: sequence k is world SEED+k.")
+    ] = False,
 ) -> None:
     """Generate a synthetic dataset in exactly the challenge layout, with ground truth.
 
@@ -40,6 +43,11 @@ def simulate(
 
     with handled(), BarProgress() as bar:
         summary = simulate_dataset(
-            out, preset=preset.value, seed=seed, overwrite=overwrite, progress=bar
+            out,
+            preset=preset.value,
+            seed=seed,
+            overwrite=overwrite,
+            progress=bar,
+            randomize=randomize,
         )
     typer.echo(summary.describe())

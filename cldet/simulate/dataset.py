@@ -8,12 +8,14 @@ and ``val_truth.csv``. Everything is a pure function of the seed: the same seed 
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,7 +31,7 @@ from cldet.simulate.flight import (
     plan_drone,
     plan_person,
 )
-from cldet.simulate.scene import build_scene
+from cldet.simulate.scene import BUILDING, Scene, build_scene
 from cldet.simulate.sensors import (
     MID360_ROW_CYCLE,
     avia_clutter_states,
@@ -38,6 +40,7 @@ from cldet.simulate.sensors import (
     mid360_frame,
     radar_frames,
 )
+from cldet.simulate.world import World, draw_world, sensor_rotation
 from cldet.stamps import format_stamp
 
 F64 = NDArray[np.float64]
@@ -133,6 +136,9 @@ def simulate_sequence(
     images: bool = True,
     class_id: int | None = None,
     merged_frame: bool | None = None,
+    tilt_deg: float = 0.0,
+    mount_offset_m: float = 0.0,
+    overhang_elevation_deg: float | None = None,
 ) -> SequenceTruth:
     """Simulate one sequence and write it as a challenge sequence folder.
 
@@ -153,6 +159,13 @@ def simulate_sequence(
         class_id: force the drone class 0..3 (default: drawn from the seed).
         merged_frame: lose one Mid-360 frame and merge it into the next (40032 rows); default:
             drawn from the seed (30%).
+        tilt_deg: probe: tilt the sensor (both LiDARs, rigidly) by this angle about a horizontal
+            axis drawn from the seed; points and truth are written in the tilted sensor frame.
+        mount_offset_m: probe: mount the sensor this much higher above the same world.
+        overhang_elevation_deg: probe: add a static 0.3 m box 3-6 m from the sensor at this
+            elevation (azimuth drawn from the seed), e.g. 67 (a sign overhanging the sensor).
+            The probes draw from their own stream: with the defaults nothing changes, byte for
+            byte, and a probe leaves the rest of the sequence's draws as they were.
 
     Returns:
         The sequence's truth.
@@ -181,9 +194,65 @@ def simulate_sequence(
             images,
             class_id,
             merged_frame,
+            _Probe(tilt_deg, mount_offset_m, overhang_elevation_deg, seed),
         )
     except OSError as err:
         raise CldetError(f"cannot write the simulated sequence {seq_dir}: {err}") from err
+
+
+def _to_sensor(p: F64, rotation: F64 | None) -> F64:
+    """Level-frame points (..., 3) in the tilted sensor frame (unchanged without a rotation)."""
+    return p if rotation is None else np.asarray(p @ rotation, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class _Probe:
+    """Optional perturbations of one sequence (the review's probes); defaults change nothing."""
+
+    tilt_deg: float
+    mount_offset_m: float
+    overhang_elevation_deg: float | None
+    seed: int | Sequence[int]
+
+    def active(self) -> bool:
+        return bool(self.tilt_deg or self.mount_offset_m or self.overhang_elevation_deg is not None)
+
+    def apply(
+        self, scene: Scene, movers: list[Mover], anchor: F64 | None
+    ) -> tuple[Scene, list[Mover], F64 | None, F64 | None]:
+        """The perturbed scene, movers and anchor (level frame), and the sensor's rotation."""
+        # a stream of its own, so that a probe leaves every other draw of the sequence as it was
+        rng = np.random.default_rng([*np.atleast_1d(np.asarray(self.seed, dtype=np.int64)), 7919])
+        tilt_azimuth = float(rng.uniform(-180.0, 180.0))
+        overhang_az = float(rng.uniform(-np.pi, np.pi))
+        overhang_r = float(rng.uniform(3.0, 6.0))
+        if self.mount_offset_m:
+            dz = np.array([0.0, 0.0, self.mount_offset_m])
+            scene = replace(
+                scene,
+                ground_base_m=scene.ground_base_m - self.mount_offset_m,
+                box_lower=scene.box_lower - dz,
+                box_upper=scene.box_upper - dz,
+                cylinders=scene.cylinders - np.array([0.0, 0.0, 0.0, dz[2], dz[2]]),
+                sphere_centres=scene.sphere_centres - dz,
+            )
+            movers = [
+                replace(m, track=replace(m.track, positions=m.track.positions - dz)) for m in movers
+            ]
+            anchor = None if anchor is None else anchor - dz
+        if self.overhang_elevation_deg is not None:
+            el = np.radians(self.overhang_elevation_deg)
+            c = overhang_r * np.array(
+                [np.cos(el) * np.cos(overhang_az), np.cos(el) * np.sin(overhang_az), np.sin(el)]
+            )
+            scene = replace(
+                scene,
+                box_lower=np.vstack([scene.box_lower, c - 0.15]),
+                box_upper=np.vstack([scene.box_upper, c + 0.15]),
+                box_kind=np.append(scene.box_kind, BUILDING).astype(np.intp),
+            )
+        rotation = sensor_rotation(self.tilt_deg, tilt_azimuth) if self.tilt_deg else None
+        return scene, movers, anchor, rotation
 
 
 def _simulate_sequence(
@@ -196,6 +265,7 @@ def _simulate_sequence(
     images: bool,
     class_id: int | None,
     merged_frame: bool | None,
+    probe: _Probe | None = None,
 ) -> SequenceTruth:
     # --- what happens: site, drone, distractors -------------------------------------------
     t0_ns = int(epoch_s) * 1_000_000_000 + int(rng.integers(0, 60_000_000)) * 1000
@@ -212,6 +282,10 @@ def _simulate_sequence(
     for _ in range(n_birds):
         movers.append(plan_bird(rng, duration_s, scene))
     merged = bool(rng.random() < 0.3) if merged_frame is None else merged_frame
+    rotation: F64 | None = None
+    if probe is not None and probe.active():
+        scene, movers, anchor, rotation = probe.apply(scene, movers, anchor)
+        track = movers[0].track
 
     # --- clocks ---------------------------------------------------------------------------
     n_lidar = max(int(round(duration_s * 10)), 3)
@@ -258,7 +332,7 @@ def _simulate_sequence(
     mid_others: list[int] = []
     pending_others = 0
     for k in range(n_lidar):
-        frame = mid360_frame(rng, rows[k], rel_s(mid_ns[k]), scene, movers)
+        frame = mid360_frame(rng, rows[k], rel_s(mid_ns[k]), scene, movers, rotation)
         if k == lost:
             pending, pending_points, pending_sum = frame.points, frame.drone_points, frame.drone_sum
             pending_others = frame.distractor_points
@@ -282,7 +356,7 @@ def _simulate_sequence(
     clutter = avia_clutter_states(rng, n_lidar)
     avia_points: list[int] = []
     for k in range(n_lidar):
-        frame = avia_frame(rng, rel_s(avia_ns[k]), scene, movers, bool(clutter[k]))
+        frame = avia_frame(rng, rel_s(avia_ns[k]), scene, movers, bool(clutter[k]), rotation)
         _save_npy(seq_dir / "livox_avia" / f"{format_stamp(int(avia_ns[k]))}.npy", frame.points)
         avia_points.append(frame.drone_points)
 
@@ -296,6 +370,8 @@ def _simulate_sequence(
 
     gt_t = (gt_ns - t0_ns) / 1e9
     gt_pos = track.at(gt_t) + PRISM_OFFSET_M + rng.normal(0.0, GT_NOISE_M, (n_gt, 3))
+    if rotation is not None:  # into the tilted sensor frame (row form of rotation.T @ p)
+        gt_pos = gt_pos @ rotation
     if labels:
         cls_array = np.array([cls], dtype=np.int64)
         for stamp, pos in zip(gt_ns, gt_pos, strict=True):
@@ -314,7 +390,7 @@ def _simulate_sequence(
         gt_stamps_ns=gt_ns.astype(np.int64),
         gt_positions=gt_pos,
         lidar_stamps_ns=lidar_ns,
-        drone_positions=track.at((lidar_ns - t0_ns) / 1e9),
+        drone_positions=_to_sensor(track.at((lidar_ns - t0_ns) / 1e9), rotation),
         mid360_drone_points=counts,
         mid360_drone_centroids=centroids,
         mid360_distractor_points=np.array(mid_others, dtype=np.int64),
@@ -322,11 +398,24 @@ def _simulate_sequence(
         avia_drone_points=np.array(avia_points, dtype=np.int64),
         distractors=tuple(m.name for m in movers[1:]),
         merged_stamp_ns=int(mid_ns[lost + 1]) if lost >= 0 else None,
-        hover_anchor=anchor,
+        hover_anchor=None if anchor is None else _to_sensor(anchor, rotation),
     )
 
 
-def _truth_rows(seq_name: str, truth: SequenceTruth) -> list[str]:
+class _Truth(Protocol):
+    """What the dataset writer needs of a sequence's truth (SequenceTruth, WorldTruth)."""
+
+    @property
+    def class_id(self) -> int: ...
+    @property
+    def gt_stamps_ns(self) -> I64: ...
+    @property
+    def gt_positions(self) -> F64: ...
+    @property
+    def lidar_stamps_ns(self) -> I64: ...
+
+
+def _truth_rows(seq_name: str, truth: _Truth) -> list[str]:
     return [
         f"{seq_name},{format_stamp(int(s))},{p[0]:.6f},{p[1]:.6f},{p[2]:.6f},{truth.class_id}"
         for s, p in zip(truth.gt_stamps_ns, truth.gt_positions, strict=True)
@@ -340,12 +429,18 @@ def simulate_dataset(
     seed: int = 0,
     overwrite: bool = False,
     progress: Progress | None = None,
+    randomize: bool = False,
 ) -> SimulationSummary:
     """Generate a synthetic dataset in the challenge layout, with the truth as CSVs.
 
     The dataset is built in ``OUT.partial-<pid>`` next to ``out`` and renamed into place at the
     end, so a crash never leaves a half-written ``out``. Sequence ``i`` of split ``j`` uses the
     generator seeded with ``[seed, j, i]``, and scenarios cycle through ``SCENARIOS``.
+
+    With ``randomize``, every sequence is a randomised world instead (``draw_world``: site,
+    sensor tilt and height, sloped ground, scenario kind, distractors; points and truth in the
+    tilted sensor frame): the k-th sequence written (train, then val, then test) is world
+    ``seed + k``, and ``worlds.csv`` lists each sequence's world.
 
     Args:
         out: the folder to create.
@@ -354,6 +449,7 @@ def simulate_dataset(
         seed: the dataset seed; the same seed gives the same bytes.
         overwrite: replace ``out`` if it exists.
         progress: receives one unit per sequence.
+        randomize: randomised worlds (see above) instead of the car-park scenarios.
 
     Returns:
         A summary of what was written.
@@ -363,6 +459,8 @@ def simulate_dataset(
         OutputExistsError: ``out`` exists and ``overwrite`` is false.
         CldetError: the dataset cannot be written.
     """
+    from cldet.simulate.randomized import write_world_sequence  # it imports this module
+
     if preset not in PRESETS:
         raise ConfigError(f"unknown preset {preset!r}: expected one of {', '.join(PRESETS)}")
     if seed < 0:
@@ -380,6 +478,7 @@ def simulate_dataset(
         partial.mkdir(parents=True)
         bar.start(sum(n for n, _ in plan.values()), f"simulating {preset} dataset")
         frames = 0
+        world_rows: list[str] = []
         for j, split in enumerate(SPLITS):
             n_seq, duration = plan[split]
             epoch = TEST_EPOCH_S if split == "test" else TRAIN_EPOCH_S
@@ -387,15 +486,29 @@ def simulate_dataset(
             query_rows: list[str] = []
             for i in range(n_seq):
                 name = f"seq{i + 1:04d}"
-                truth = simulate_sequence(
-                    partial / split / name,
-                    seed=(seed, j, i),
-                    duration_s=duration,
-                    scenario=SCENARIOS[(i + 2 * j) % len(SCENARIOS)],
-                    labels=split == "train",
-                    epoch_s=epoch + 120 * i,
-                    merged_frame=True if i == 0 else None,
-                )
+                truth: _Truth
+                if randomize:
+                    world = draw_world(seed + len(world_rows))
+                    truth = write_world_sequence(
+                        partial / split / name,
+                        world,
+                        duration,
+                        labels=split == "train",
+                        epoch_s=epoch + 120 * i,
+                    )
+                    world_rows.append(
+                        f"{split},{name}," + ",".join(str(v) for v in dataclasses.astuple(world))
+                    )
+                else:
+                    truth = simulate_sequence(
+                        partial / split / name,
+                        seed=(seed, j, i),
+                        duration_s=duration,
+                        scenario=SCENARIOS[(i + 2 * j) % len(SCENARIOS)],
+                        labels=split == "train",
+                        epoch_s=epoch + 120 * i,
+                        merged_frame=True if i == 0 else None,
+                    )
                 frames += len(truth.lidar_stamps_ns)
                 truth_rows += _truth_rows(name, truth)
                 query_rows += [f"{name},{format_stamp(int(s))},," for s in truth.gt_stamps_ns]
@@ -413,6 +526,11 @@ def simulate_dataset(
                 (partial / "val_truth.csv").write_text(
                     header + "".join(r + "\n" for r in truth_rows)
                 )
+        if randomize:
+            names = ",".join(f.name for f in dataclasses.fields(World))
+            (partial / "worlds.csv").write_text(
+                f"split,sequence,{names}\n" + "".join(r + "\n" for r in world_rows)
+            )
         if out.exists():
             if out.is_dir():
                 shutil.rmtree(out)

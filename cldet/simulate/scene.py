@@ -52,6 +52,10 @@ class Scene:
             h = h + amp * np.sin(kx * x + ky * y + phase)
         return h
 
+    def ground_up_component(self, dirs: F64) -> F64:
+        """(N,) component of unit directions ``dirs`` (N, 3) along the ground's upward normal."""
+        return dirs[:, 2]
+
     def top_height(self, x: float, y: float, margin_m: float = 0.5) -> float:
         """Highest static surface (ground, roof, pole, canopy) within ``margin_m`` of x, y (metres)."""
         top = float(self.ground_height(np.asarray(x), np.asarray(y)))

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import struct
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,6 +52,9 @@ class ScanResult:
     drone_points: int  # how many valid rows are on the drone
     drone_sum: F64  # (3,) sum of the drone's points (metres), for centroids
     distractor_points: int  # how many valid rows are on people and birds
+    drone_rows: NDArray[np.intp] = field(  # (K,) row indices of the drone's points
+        default_factory=lambda: np.zeros(0, dtype=np.intp)
+    )
 
 
 def mid360_directions(rng: np.random.Generator, rows: int) -> F64:
@@ -140,31 +143,36 @@ def scan(
     movers: list[Mover],
     rng: np.random.Generator,
     density_scale: float = 1.0,
+    rotation: F64 | None = None,
 ) -> tuple[F64, NDArray[np.bool_], NDArray[np.intp]]:
     """Ray-cast one frame: each ray fired at ``stamp_s + i/rows * 100 ms``.
 
     Args:
-        dirs: (rows, 3) unit directions in firing order.
+        dirs: (rows, 3) unit directions in firing order, in the sensor's frame.
         stamp_s: scan start, seconds since the sequence start.
         scene: the static world.
         movers: drone, people, birds.
         rng: random source (detection, range noise).
         density_scale: multiplies every return probability (sensor sensitivity).
+        rotation: (3, 3) sensor-to-scene rotation (a tilted mount): rays are cast along
+            ``rotation @ d`` in the scene, points are returned in the sensor's frame. None: level.
 
     Returns:
-        (rows, 3) float64 points (rows without a return hold zeros), (rows,) valid mask,
+        (rows, 3) float64 points in the sensor's frame (rows without a return hold zeros),
+        (rows,) valid mask,
         (rows,) surface kind of each row (-1 where no surface was hit).
     """
     rows = dirs.shape[0]
     ray_t = stamp_s + SCAN_PERIOD_S * np.arange(rows) / rows
-    dist, kind = scene.cast(dirs, stamp_s + SCAN_PERIOD_S / 2, rng)
-    _cast_movers(dirs, ray_t, movers, dist, kind)
+    cast_dirs = dirs if rotation is None else dirs @ rotation.T  # scene frame
+    dist, kind = scene.cast(cast_dirs, stamp_s + SCAN_PERIOD_S / 2, rng)
+    _cast_movers(cast_dirs, ray_t, movers, dist, kind)
     hit = np.isfinite(dist)
     prob = np.zeros(rows)
     prob[hit] = HIT_PROBABILITY[kind[hit]] * _fade(dist[hit]) * density_scale
     # the ground returns less at grazing incidence and from inside the grass
     ground = kind == GROUND
-    sin_graze = np.maximum(-dirs[:, 2], 1e-3)
+    sin_graze = np.maximum(-scene.ground_up_component(cast_dirs), 1e-3)
     prob[ground] *= np.minimum(1.0, sin_graze[ground] / _GRAZE_FULL) ** 1.5
     valid = rng.random(rows) < prob
     r = np.where(valid, dist, 0.0)
@@ -180,11 +188,19 @@ def scan(
 
 
 def mid360_frame(
-    rng: np.random.Generator, rows: int, stamp_s: float, scene: Scene, movers: list[Mover]
+    rng: np.random.Generator,
+    rows: int,
+    stamp_s: float,
+    scene: Scene,
+    movers: list[Mover],
+    rotation: F64 | None = None,
 ) -> ScanResult:
-    """One Mid-360 frame: ``rows`` rows, plus 0-4 lone speckle points and 1-2 self-returns."""
+    """One Mid-360 frame: ``rows`` rows, plus 0-4 lone speckle points and 1-2 self-returns.
+
+    ``rotation`` (3, 3) turns the sensor's frame into the scene's (a tilted mount, see ``scan``).
+    """
     dirs = mid360_directions(rng, rows)
-    points, valid, kind = scan(dirs, stamp_s, scene, movers, rng)
+    points, valid, kind = scan(dirs, stamp_s, scene, movers, rng, rotation=rotation)
     on_drone = valid & (kind == DRONE)
     drone = int(np.count_nonzero(on_drone))
     drone_sum = points[on_drone].sum(axis=0)
@@ -196,7 +212,7 @@ def mid360_frame(
         pick = rng.choice(empty, n_speckle + n_self, replace=False)
         ranges = np.concatenate([rng.uniform(1.0, 60.0, n_speckle), rng.uniform(0.03, 0.1, n_self)])
         points[pick] = _to_points(dirs[pick], ranges).astype(np.float64)
-    return ScanResult(points, drone, drone_sum, others)
+    return ScanResult(points, drone, drone_sum, others, np.flatnonzero(on_drone))
 
 
 def avia_frame(
@@ -205,10 +221,17 @@ def avia_frame(
     scene: Scene,
     movers: list[Mover],
     clutter: bool,
+    rotation: F64 | None = None,
 ) -> ScanResult:
-    """One Avia frame: 24000 rows looking up; ``clutter`` adds 1-10 sporadic (mostly far) returns."""
+    """One Avia frame: 24000 rows looking up; ``clutter`` adds 1-10 sporadic (mostly far) returns.
+
+    ``rotation`` (3, 3) turns the sensor's frame into the scene's: the Avia is rigidly mounted
+    with the Mid-360, so its cone tilts with it.
+    """
     dirs = avia_directions(rng)
-    points, valid, kind = scan(dirs, stamp_s, scene, movers, rng, AVIA_DENSITY_SCALE)
+    points, valid, kind = scan(
+        dirs, stamp_s, scene, movers, rng, AVIA_DENSITY_SCALE, rotation=rotation
+    )
     on_drone = valid & (kind == DRONE)
     drone = int(np.count_nonzero(on_drone))
     drone_sum = points[on_drone].sum(axis=0)
@@ -223,7 +246,7 @@ def avia_frame(
         valid[pick] = True
     out = points
     out[~valid] = np.array([-0.0, -0.0, 0.0])
-    return ScanResult(out, drone, drone_sum, others)
+    return ScanResult(out, drone, drone_sum, others, np.flatnonzero(on_drone))
 
 
 def avia_clutter_states(rng: np.random.Generator, n: int) -> NDArray[np.bool_]:
