@@ -8,6 +8,7 @@ Lengths are metres (``*_m``), durations seconds (``*_s``), speeds m/s.
 
 from __future__ import annotations
 
+import difflib
 from pathlib import Path
 from typing import Any, Literal
 
@@ -232,15 +233,44 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+_LIBRARY_PREFIXES = ("Value error,", "Assertion failed,")  # pydantic's, not ours
+
+
+def _known_keys(loc: tuple[Any, ...]) -> list[str]:
+    """The keys allowed beside the last element of ``loc`` (the fields of its section)."""
+    model: Any = CldetConfig
+    for part in loc[:-1]:
+        field = getattr(model, "model_fields", {}).get(part)
+        if field is None:
+            return []
+        model = field.annotation
+    return list(getattr(model, "model_fields", {}))
+
+
 def _describe(err: ValidationError) -> str:
-    """One line per problem: the dotted key, the bad value and what was expected."""
+    """One line per problem: the dotted key, the bad value and what was expected.
+
+    An unknown key gets the closest known key of its section as a suggestion (a misspelling);
+    pydantic's own prefixes ("Value error, ") are dropped and an empty reason is never shown.
+    """
     lines = []
     for item in err.errors():
-        key = ".".join(str(p) for p in item["loc"]) or "<root>"
+        loc = tuple(item["loc"])
+        key = ".".join(str(p) for p in loc) or "<root>"
         if item["type"] == "extra_forbidden":
-            lines.append(f"unknown key {key!r}")
-        else:
-            lines.append(f"{key} = {item.get('input')!r}: {item['msg']}")
+            known = _known_keys(loc)
+            close = difflib.get_close_matches(str(loc[-1]), known, n=1, cutoff=0.6)
+            if close:
+                hint = f" (did you mean {'.'.join([*map(str, loc[:-1]), close[0]])!r}?)"
+            else:
+                hint = f"; known keys here: {', '.join(known)}" if known else ""
+            lines.append(f"unknown key {key!r}{hint}")
+            continue
+        reason = str(item.get("msg", ""))
+        for prefix in _LIBRARY_PREFIXES:
+            reason = reason.removeprefix(prefix)
+        reason = reason.strip() or str(item.get("type", "")).replace("_", " ") or "invalid value"
+        lines.append(f"{key} = {item.get('input')!r}: {reason}")
     return "; ".join(lines)
 
 

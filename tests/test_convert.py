@@ -436,7 +436,7 @@ def test_unknown_folder_in_a_sequence_is_warned_about(
     result = cli("convert", tiny, "-o", tmp_path / "logs", "--split", "val", "--workers", 1)
     assert result.exit_code == 0  # type: ignore[attr-defined]
     assert (
-        "warning: ignoring folders in" in result.output  # type: ignore[attr-defined]
+        "WARNING: ignoring folders in" in result.output  # type: ignore[attr-defined]
         and "Lidar_360 (did you mean lidar_360?)" in result.output  # type: ignore[attr-defined]
     )
 

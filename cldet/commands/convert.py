@@ -124,7 +124,7 @@ def convert(
             progress=bar,
         )
     for warning in caught:
-        echo_err(f"warning: {warning.message}")
+        echo_err(f"WARNING: {warning.message}")
     if report.ok:
         typer.echo(report.describe())
         return
