@@ -155,7 +155,7 @@ class TrackingConfig(BaseModel):
         default=0.6, ge=0, description="raw-point search radius around a prediction (0: off)"
     )
     raw_min_cluster_hits: int = Field(
-        default=3, ge=1, description="cluster detections before a track may use raw points"
+        default=2, ge=1, description="cluster detections before a track may use raw points"
     )
     raw_min_spread_m: float = Field(
         default=0.3, ge=0, description="... spread over at least this (the track has moved)"
@@ -173,7 +173,6 @@ class SmoothingConfig(BaseModel):
 
     model_config = _STRICT
 
-    enabled: bool = True
     accel_psd: float = Field(
         default=2.0, gt=0, description="white-acceleration PSD of the smoother"
     )

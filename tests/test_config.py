@@ -76,7 +76,7 @@ def test_frozen() -> None:
 
 
 def test_config_to_dict_round_trips_through_json() -> None:
-    cfg = load_config(overrides={"bias": {"along_ray_m": 0.1}, "tracking": {"ground_z_m": -1.2}})
+    cfg = load_config(overrides={"bias": {"along_ray_m": 0.1}, "frames": {"scan_offset_s": 0.02}})
     data = json.loads(json.dumps(config_to_dict(cfg)))
     assert data["bias"]["along_ray_m"] == 0.1
     assert data["tracking"]["fallback_position"] == [0.734, -9.739, 33.353]

@@ -50,7 +50,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cldet.config import CldetConfig
-from cldet.core.background import FOREGROUND, BackgroundModel
+from cldet.core.background import FOREGROUND, MARGIN, BackgroundModel
 from cldet.core.bias import apply_bias
 from cldet.core.clustering import cluster_points, summarize_clusters
 from cldet.core.frames import valid_points
@@ -192,6 +192,9 @@ class TrackEstimator:
         self._evidence: dict[int, _Evidence] = {}
         self._choice: int | None = None  # causal: the track followed
         self._causal: list[Estimate] = []
+        # where protected movers were last seen: (position (3,), time s); a cluster there is
+        # protected too (a hovering drone's track may end and restart without moving again)
+        self._zones: list[tuple[NDArray[np.float64], float]] = []
         self._offset_s = config.frames.scan_offset_s
         fc = config.tracking
         self._fov_tan = np.tan(np.radians(fc.fov_bottom_deg))
@@ -205,7 +208,10 @@ class TrackEstimator:
         pts, n_mid = fuse_points(frame, cfg)
         bg = self.background
         bg.advance(frame.stamp_ns)
-        fg_idx = np.flatnonzero(bg.classify(pts) == FOREGROUND)
+        labels_bg = bg.classify(pts)
+        if self._zones:
+            self._reclaim(pts, labels_bg)
+        fg_idx = np.flatnonzero(labels_bg == FOREGROUND)
         if len(fg_idx) > cfg.clustering.max_points:  # keep the nearest
             r2 = np.einsum("ij,ij->i", pts[fg_idx], pts[fg_idx])
             fg_idx = np.sort(fg_idx[np.argsort(r2, kind="stable")[: cfg.clustering.max_points]])
@@ -282,11 +288,13 @@ class TrackEstimator:
                 tc,
             )
             both = (table.n_mid360 > 0) & (table.n_avia > 0)
+            self._zones = [z for z in self._zones if t_s - z[1] <= tc.max_miss_s]
             for j, tid in enumerate(owner.tolist()):
                 self._evidence.setdefault(tid, _Evidence()).add(
                     t_s, float(w[j]), table.centroid[j], bool(both[j])
                 )
-                if protect and tracker.is_confirmed_mover(tid):
+                if protect and self._protected(tid, table.centroid[j], table.extent[j]):
+                    self._zones.append((table.centroid[j].copy(), t_s))
                     if keep is None:
                         keep = np.ones(len(pts), dtype=bool)
                     keep[fg_idx[labels == j]] = False
@@ -302,11 +310,36 @@ class TrackEstimator:
             )
             self._evidence.setdefault(tid, _Evidence()).add(t_s, float(w[0]), pos, False)
             if protect:
+                self._zones.append((np.asarray(pos, dtype=np.float64).copy(), t_s))
                 if keep is None:
                     keep = np.ones(len(pts), dtype=bool)
                 d = pts - pos.astype(np.float32)
                 keep &= np.einsum("ij,ij->i", d, d) > gate2
         return keep
+
+    def _reclaim(self, pts: NDArray[np.float32], labels: NDArray[np.uint8]) -> None:
+        """Points background only through dilation (MARGIN) near a protected mover's last place
+        are foreground again: dilation forgives beam divergence and sway of static surfaces,
+        not a drone hovering right beside one (in place: ``labels`` is changed)."""
+        margin = np.flatnonzero(labels == MARGIN)
+        if len(margin) == 0:
+            return
+        g2 = self.config.tracking.raw_gate_m ** 2
+        p = pts[margin].astype(np.float64)
+        near = np.zeros(len(margin), dtype=bool)
+        for z, _ in self._zones:
+            d = p - z
+            near |= np.einsum("ij,ij->i", d, d) <= g2
+        labels[margin[near]] = FOREGROUND
+
+    def _protected(self, track_id: int, centroid: NDArray[np.float64], extent: float) -> bool:
+        """A confirmed small mover's cluster, or a small one where such a mover was just seen."""
+        tc = self.config.tracking
+        if self._tracker.is_confirmed_mover(track_id):
+            return True
+        return extent <= tc.max_size_m and any(
+            float(np.linalg.norm(centroid - z)) <= tc.max_gate_m for z, _ in self._zones
+        )
 
     def _decide(self, index: int, stamp_ns: int) -> Estimate:
         """The causal estimate: the active track with the most evidence so far."""

@@ -27,7 +27,7 @@ from cldet.core.estimator import (
 )
 from cldet.core.frames import pair_frames, valid_points
 from cldet.errors import FrameOrderError
-from cldet.types import LidarFrame, PositionSample, Source
+from cldet.types import Cluster, LidarFrame, PositionSample, Source
 
 simulate = pytest.importorskip("cldet.simulate")
 mmaud = pytest.importorskip("converters.mmaud")
@@ -302,3 +302,60 @@ def test_cldet_without_environment_clusters_every_valid_point(sim_root: Path) ->
         # the estimate is the mean of the largest cluster over all points
         assert det_none.clusters[0].n_points == max(c.n_points for c in det_none.clusters)
     assert len(result.estimates) == len(frames)
+
+
+def _scene_frames(path: list[np.ndarray], seed: int) -> list[LidarFrame]:
+    """Mid-360-like scans of the small test scene (ground, wall, a post) with a 0.3 m drone."""
+    from tests.core.scene import scan
+
+    rng = np.random.default_rng(seed)
+    post = ((5.8, -4.2, -1.5), (6.2, -3.8, 1.0))
+    empty = np.zeros((0, 3), np.float32)
+    return [
+        LidarFrame(k * 100_000_000, scan(rng, [((*p,), 0.3)], n_rays=6000, boxes=[post]), empty)
+        for k, p in enumerate(path)
+    ]
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_drone_that_flies_in_and_hovers_is_protected_from_the_background(seed: int) -> None:
+    # it flies 5 m in 1.5 s, then hovers 0.2 m beside the post for 4.5 s: longer than the
+    # background needs to learn a static surface, not floating in free space, and inside the
+    # post's dilation margin: protection keeps its points out of the background and reclaims
+    # the margin around it
+    spot = np.array([6.0, -3.3, 0.8])
+    start = spot + np.array([-4.0, -3.0, 0.5])
+    path = [start + (spot - start) * min(k / 15, 1.0) for k in range(60)]
+    frames = _scene_frames(path, seed)
+
+    def hovering_detected(protect: bool) -> float:
+        cfg = load_config(overrides={"background": {"protect_tracks": protect}})
+        _, result = estimate_sequence(frames, cfg)
+        late = result.causal[-20:]
+        near = [np.linalg.norm(e.position - spot) < 0.5 for e in late]
+        detected = [e.source == Source.DETECTED for e in late]
+        return float(np.mean(np.array(near) & np.array(detected)))
+
+    assert hovering_detected(True) > 0.9
+    assert hovering_detected(False) < 0.5
+
+
+def test_a_cluster_cut_by_the_bottom_of_the_field_of_view_may_reach_the_ground() -> None:
+    # the upper body of a person 0.7 m from the sensor: its lowest point lies on the Mid-360's
+    # bottom edge (-7.3 deg), 1.4 m above the ground; a drone as high, 9 m away, is not cut
+    est = TrackEstimator(load_config())
+    rng = np.random.default_rng(0)
+    ground = np.column_stack([rng.uniform(-20, 20, (2000, 2)), np.full(2000, -1.5)])
+    assert est.background.ground.fit(ground)
+    z_cut = np.tan(np.radians(-7.3)) * 0.7 + 0.05
+    person = Cluster(
+        0, np.array([0.7, 0.0, 0.4]), np.array([0.5, -0.2, z_cut]), np.array([0.9, 0.2, 0.8]), 20
+    )
+    drone = Cluster(
+        1, np.array([9.0, 0.0, 0.0]), np.array([8.8, -0.2, -0.1]), np.array([9.2, 0.2, 0.1]), 6
+    )
+    heights = est._heights((person, drone))
+    np.testing.assert_allclose(heights, [0.0, 1.4], atol=0.05)
+    off = TrackEstimator(load_config(overrides={"tracking": {"fov_cut_m": 0.0}}))
+    off.background.ground.fit(ground)
+    assert off._heights((person, drone))[0] == pytest.approx(z_cut + 1.5, abs=0.05)
