@@ -292,7 +292,6 @@ def _floating_blobs(
     return out
 
 
-
 class BackgroundModel:
     """Online static range image: per frame, ``advance`` to its stamp, ``classify``, ``update``.
 
@@ -440,9 +439,11 @@ class BackgroundModel:
         )
         # ... by the ground: a drone hovering over a car or a pole top has them right below
         behind = self._dilated[cells].astype(np.float64)  # the nearest static surface around
-        surface = probe / np.maximum(r, 1e-9)[:, None] * np.where(np.isfinite(behind), behind, 0.0)[
-            :, None
-        ]
+        surface = (
+            probe
+            / np.maximum(r, 1e-9)[:, None]
+            * np.where(np.isfinite(behind), behind, 0.0)[:, None]
+        )
         band = _GROUND_BAND_M + behind * np.tan(np.radians(self.cfg.cell_deg))
         with np.errstate(invalid="ignore"):
             on_ground = self.ground.height_above(surface) < band

@@ -324,7 +324,7 @@ class TrackEstimator:
         margin = np.flatnonzero(labels == MARGIN)
         if len(margin) == 0:
             return
-        g2 = self.config.tracking.raw_gate_m ** 2
+        g2 = self.config.tracking.raw_gate_m**2
         p = pts[margin].astype(np.float64)
         near = np.zeros(len(margin), dtype=bool)
         for z, _ in self._zones:
