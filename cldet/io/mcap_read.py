@@ -74,6 +74,7 @@ _CORRUPT: tuple[type[BaseException], ...] = (
     ValueError,  # also UnicodeDecodeError, mcap's CRCValidationError
     IndexError,
     KeyError,
+    OverflowError,  # a corrupt size handed to a decompressor
     struct.error,
     EOFError,
     zstandard.ZstdError,
@@ -300,6 +301,7 @@ class LogReader:
             raise LogError(f"cannot open MCAP log {self.path}: {err.strerror or err}") from err
         try:
             reader = make_reader(self._file, validate_crcs=True)  # catches corrupt chunks
+            reader.get_header()  # annotate copies it unparsed: it must be readable
             summary = reader.get_summary()
         except _UNREADABLE as err:
             self._file.close()
