@@ -68,6 +68,7 @@ _SAME_SURFACE_FRACTION = 0.1
 # post top: a drone hovering just above it)
 _MAX_SUPPORT_CELLS = 3
 _GROUND_BAND_M = 0.5  # a static surface this close to the local ground is the ground
+_GROUND_EVERY_BINS = 5  # the ground is refitted every this many bins (it does not move)
 
 
 def direction_cells(
@@ -379,7 +380,7 @@ class BackgroundModel:
         # the ground from the last frame's returns on static surfaces (real points: a cell's
         # centre at its nearest range sits above a ground seen at a grazing angle)
         last = self._last_points
-        if len(last):
+        if len(last) and (self.n_bins % _GROUND_EVERY_BINS == 1 or not self.ground.fitted):
             self.ground.fit(last[self.classify(last) == CORE])
 
     def static_range(self) -> NDArray[np.float32]:

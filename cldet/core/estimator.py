@@ -194,7 +194,7 @@ class TrackEstimator:
         self._causal: list[Estimate] = []
         # where protected movers were last seen: (position (3,), time s); a cluster there is
         # protected too (a hovering drone's track may end and restart without moving again)
-        self._zones: list[tuple[NDArray[np.float64], float]] = []
+        self._zones: dict[int, tuple[NDArray[np.float64], float]] = {}  # by track id
         self._offset_s = config.frames.scan_offset_s
         fc = config.tracking
         self._fov_tan = np.tan(np.radians(fc.fov_bottom_deg))
@@ -288,13 +288,13 @@ class TrackEstimator:
                 tc,
             )
             both = (table.n_mid360 > 0) & (table.n_avia > 0)
-            self._zones = [z for z in self._zones if t_s - z[1] <= tc.max_miss_s]
+            self._zones = {k: z for k, z in self._zones.items() if t_s - z[1] <= tc.max_miss_s}
             for j, tid in enumerate(owner.tolist()):
                 self._evidence.setdefault(tid, _Evidence()).add(
                     t_s, float(w[j]), table.centroid[j], bool(both[j])
                 )
                 if protect and self._protected(tid, table.centroid[j], table.extent[j]):
-                    self._zones.append((table.centroid[j].copy(), t_s))
+                    self._zones[tid] = (table.centroid[j].copy(), t_s)
                     if keep is None:
                         keep = np.ones(len(pts), dtype=bool)
                     keep[fg_idx[labels == j]] = False
@@ -310,7 +310,7 @@ class TrackEstimator:
             )
             self._evidence.setdefault(tid, _Evidence()).add(t_s, float(w[0]), pos, False)
             if protect:
-                self._zones.append((np.asarray(pos, dtype=np.float64).copy(), t_s))
+                self._zones[tid] = (np.asarray(pos, dtype=np.float64).copy(), t_s)
                 if keep is None:
                     keep = np.ones(len(pts), dtype=bool)
                 d = pts - pos.astype(np.float32)
@@ -327,7 +327,7 @@ class TrackEstimator:
         g2 = self.config.tracking.raw_gate_m**2
         p = pts[margin].astype(np.float64)
         near = np.zeros(len(margin), dtype=bool)
-        for z, _ in self._zones:
+        for z, _ in self._zones.values():
             d = p - z
             near |= np.einsum("ij,ij->i", d, d) <= g2
         labels[margin[near]] = FOREGROUND
@@ -338,7 +338,7 @@ class TrackEstimator:
         if self._tracker.is_confirmed_mover(track_id):
             return True
         return extent <= tc.max_size_m and any(
-            float(np.linalg.norm(centroid - z)) <= tc.max_gate_m for z, _ in self._zones
+            float(np.linalg.norm(centroid - z)) <= tc.max_gate_m for z, _ in self._zones.values()
         )
 
     def _decide(self, index: int, stamp_ns: int) -> Estimate:
