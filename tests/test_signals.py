@@ -125,3 +125,62 @@ def test_signal_mid_convert_leaves_nothing_behind(tmp_path: Path, sig: signal.Si
         f"seq{s:04d}.mcap" for s in range(1, 5)
     ]
     assert digest(data) == before
+
+
+SLOW_FRAMES = """
+import numpy as _np
+import time as _time
+_frombuffer = _np.frombuffer
+def _slow_frombuffer(*args, **kwargs):
+    _time.sleep(0.1)
+    return _frombuffer(*args, **kwargs)
+_np.frombuffer = _slow_frombuffer
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_signal_mid_annotate_leaves_the_log_intact(tmp_path: Path, sig: signal.Signals) -> None:
+    from cldet.io import LogWriter
+    from cldet.io import topics as tp
+
+    log, hook = tmp_path / "seq0001.mcap", tmp_path / "hook"
+    rng = np.random.default_rng(2)
+    with open(log, "wb") as f, LogWriter(f) as writer:
+        for i in range(20):
+            points = rng.normal(0, 20, (200, 3)).astype(np.float32)
+            writer.write_cloud(tp.LIDAR_360, 10**18 + i * 10**8, points, tp.FRAME_MID360)
+        writer.write_metadata(tp.METADATA_SOURCE, {"sequence": "seq0001", "split": "val"})
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(SLOW_FRAMES)
+    before = log.read_bytes()
+    tag = f"{os.getpid()}a{sig.value}"
+    env = {**os.environ, "PYTHONPATH": f"{hook}:{REPO}", "CLDET_SIGNAL_TEST": tag}
+    command = [sys.executable, "-m", "cldet", "annotate", str(log)]  # with the .rrd
+    run = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 60
+    while not temporaries(tmp_path) and time.monotonic() < deadline:  # the .rrd's, at first
+        time.sleep(0.05)
+    assert temporaries(tmp_path), "the run never started writing"
+    time.sleep(1.0)
+    run.send_signal(sig)
+    run.wait(timeout=30)
+    assert run.stderr is not None
+    if sig == signal.SIGTERM:
+        err = run.stderr.read()
+        assert run.returncode == 143, err
+        assert b"terminated (SIGTERM)" in err and b"Traceback" not in err
+        assert temporaries(tmp_path) == []
+    else:
+        assert run.returncode == -signal.SIGKILL
+    assert log.read_bytes() == before  # the input, byte for byte
+    assert not (tmp_path / "seq0001.rrd").exists()
+    time.sleep(5)
+    assert processes_tagged(tag) == []
+
+    again = subprocess.run(
+        command, env={**os.environ, "PYTHONPATH": str(REPO)},
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert again.returncode == 0, again.stderr
+    assert temporaries(tmp_path) == []  # the killed run's stale ones removed too
+    assert list_topics(log)["/cldet/estimate"] == 20 and (tmp_path / "seq0001.rrd").exists()
