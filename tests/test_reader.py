@@ -503,9 +503,12 @@ def test_no_sequence_found(tmp_path: Path) -> None:
 
 def test_empty_sequence_without_modality_folder(tmp_path: Path) -> None:
     (tmp_path / "val" / "seq0001" / "calib").mkdir(parents=True)
-    with pytest.raises(
-        DatasetError,
-        match=r"empty sequence .*seq0001: no modality folder, expected at least one of lidar_360",
+    with (
+        pytest.warns(UserWarning, match=r"not modalities .*: calib$"),
+        pytest.raises(
+            DatasetError,
+            match=r"empty sequence .*seq0001: no modality folder, expected at least one of lidar_360",
+        ),
     ):
         find_sequences(tmp_path)
 
