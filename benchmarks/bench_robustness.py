@@ -344,6 +344,22 @@ def report_probes(rows: list[dict[str, Any]], methods: Sequence[str]) -> None:
         print(f"  {probe:16s}" + "".join(f" {c:>22s}" for c in cells))
 
 
+def _key(row: dict[str, Any]) -> tuple[Any, ...]:
+    """Which sequence a row belongs to."""
+    return (row["seed"], row.get("probe"), row.get("scenario"))
+
+
+def _key_of(job: Job) -> tuple[Any, ...]:
+    return (job.seed, job.probe, job.scenario)
+
+
+def _write_json(path: Path, rows: list[dict[str, Any]]) -> None:
+    """Write the rows to ``path`` through a temporary file (an interrupted run keeps them)."""
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(json.dumps(rows, indent=1))
+    tmp.replace(path)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Parse the options, run the sequences on the workers, print the tables."""
     parser = argparse.ArgumentParser(
@@ -361,7 +377,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--kinds", help="comma-separated scenario kinds to keep")
     parser.add_argument("--sites", help="comma-separated sites to keep")
     parser.add_argument("--config", type=Path, help="estimator configuration (YAML)")
-    parser.add_argument("--json", type=Path, help="write the per-sequence rows here")
+    parser.add_argument(
+        "--json", type=Path, help="write the per-sequence rows here (updated after each sequence)"
+    )
+    parser.add_argument(
+        "--resume", action="store_true", help="keep the rows already in --json, run the rest"
+    )
     parser.add_argument(
         "--probes", action="store_true", help="the probes on the original simulator"
     )
@@ -403,10 +424,21 @@ def main(argv: list[str] | None = None) -> None:
             world = draw_world(seed)
             if world.kind in kinds and world.site in sites:
                 jobs.append(Job(seed, args.duration, methods, config))
-    if not jobs:
-        parser.error("no sequences to run")
-
     rows: list[dict[str, Any]] = []
+    if args.resume:
+        if not args.json:
+            parser.error("--resume needs --json")
+        if args.json.exists():
+            rows = [
+                r
+                for r in json.loads(args.json.read_text())
+                if _key(r) in {_key_of(j) for j in jobs}
+            ]
+            done = {_key(r) for r in rows}
+            jobs = [j for j in jobs if _key_of(j) not in done]
+            print(f"resuming: {len(done)} sequences already in {args.json}", file=sys.stderr)
+    if not jobs and not rows:
+        parser.error("no sequences to run")
     started = time.perf_counter()
     pool = None
     if args.workers > 1:
@@ -417,6 +449,8 @@ def main(argv: list[str] | None = None) -> None:
     try:
         for i, job_rows in enumerate(results):
             rows.extend(job_rows)
+            if args.json:
+                _write_json(args.json, rows)
             if not args.quiet and job_rows:
                 r0 = job_rows[0]
                 what = (
@@ -443,7 +477,7 @@ def main(argv: list[str] | None = None) -> None:
         report(rows, methods, args.duration)
     print(f"\n{len(jobs)} sequences in {elapsed:.0f} s on {args.workers} worker(s)")
     if args.json:
-        args.json.write_text(json.dumps(rows, indent=1))
+        _write_json(args.json, rows)
 
 
 if __name__ == "__main__":

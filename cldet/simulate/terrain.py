@@ -11,7 +11,7 @@ spheres), so the existing ray caster and sensor models apply unchanged; unlike t
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -487,7 +487,7 @@ def build_site(world: World, rng: np.random.Generator) -> TerrainScene:
         deck = np.array(
             [-extent[0], extent[1], -extent[2], extent[3], -world.mount_height_m], dtype=np.float64
         )
-        bare = TerrainScene(**{**bare.__dict__, "deck": deck})
+        bare = replace(bare, deck=deck)
     site = _Site(_ground_fn(bare), rng)
     _BUILDERS[world.site](world, rng, site, bare)
     if world.overhead:
