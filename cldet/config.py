@@ -104,6 +104,12 @@ class ClusteringConfig(BaseModel):
     max_points: int = Field(
         default=20000, ge=1, description="foreground points beyond this (nearest first) are dropped"
     )
+    max_clusters: int = Field(
+        default=300,
+        ge=1,
+        description="a frame's clusters beyond this (smallest first) become noise: a frame flooded"
+        " with speckle (rain, a broken sensor) cannot flood the tracker",
+    )
 
 
 class TrackingConfig(BaseModel):

@@ -48,6 +48,7 @@ from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from cldet.config import CldetConfig
 from cldet.core.background import FOREGROUND, MARGIN, BackgroundModel
@@ -62,7 +63,7 @@ from cldet.core.selection import (
     select_chain,
 )
 from cldet.core.smoothing import extrapolate, rts_smooth
-from cldet.core.tracking import CandidateTracker, ClusterTable
+from cldet.core.tracking import ActiveTracks, CandidateTracker, ClusterTable
 from cldet.errors import FrameOrderError
 from cldet.types import Cluster, Estimate, LidarFrame, Source
 
@@ -218,6 +219,7 @@ class TrackEstimator:
         fg = pts[fg_idx]
         n_mid_fg = int(np.searchsorted(fg_idx, n_mid))
         labels = cluster_points(fg, cfg.clustering.eps_m, cfg.clustering.min_samples)
+        labels[labels >= cfg.clustering.max_clusters] = -1  # ids rank by size: the smallest go
         clusters = summarize_clusters(fg, labels, n_mid_fg)
         table = ClusterTable.from_clusters(clusters)
         if len(clusters):
@@ -289,15 +291,25 @@ class TrackEstimator:
             )
             both = (table.n_mid360 > 0) & (table.n_avia > 0)
             self._zones = {k: z for k, z in self._zones.items() if t_s - z[1] <= tc.max_miss_s}
+            zone = self._zone_of(table) if protect else np.full(len(owner), -1)
             for j, tid in enumerate(owner.tolist()):
                 self._evidence.setdefault(tid, _Evidence()).add(
                     t_s, float(w[j]), table.centroid[j], bool(both[j])
                 )
-                if protect and self._protected(tid, table.centroid[j], table.extent[j]):
-                    self._zones[tid] = (table.centroid[j].copy(), t_s)
-                    if keep is None:
-                        keep = np.ones(len(pts), dtype=bool)
-                    keep[fg_idx[labels == j]] = False
+                if not protect:
+                    continue
+                # a confirmed small mover's cluster opens (or moves) its protected place; a
+                # small cluster in such a place keeps it (the track may have restarted there)
+                if tracker.is_confirmed_mover(tid):
+                    where = tid
+                elif zone[j] >= 0:
+                    where = int(zone[j])
+                else:
+                    continue
+                self._zones[where] = (table.centroid[j].copy(), t_s)
+                if keep is None:
+                    keep = np.ones(len(pts), dtype=bool)
+                keep[fg_idx[labels == j]] = False
         # raw-gate detections of this frame (tracks that got no cluster)
         active = tracker.active()
         gate2 = tc.raw_gate_m**2
@@ -324,22 +336,25 @@ class TrackEstimator:
         margin = np.flatnonzero(labels == MARGIN)
         if len(margin) == 0:
             return
-        g2 = self.config.tracking.raw_gate_m**2
-        p = pts[margin].astype(np.float64)
-        near = np.zeros(len(margin), dtype=bool)
-        for z, _ in self._zones.values():
-            d = p - z
-            near |= np.einsum("ij,ij->i", d, d) <= g2
-        labels[margin[near]] = FOREGROUND
-
-    def _protected(self, track_id: int, centroid: NDArray[np.float64], extent: float) -> bool:
-        """A confirmed small mover's cluster, or a small one where such a mover was just seen."""
-        tc = self.config.tracking
-        if self._tracker.is_confirmed_mover(track_id):
-            return True
-        return extent <= tc.max_size_m and any(
-            float(np.linalg.norm(centroid - z)) <= tc.max_gate_m for z, _ in self._zones.values()
+        places = np.array([z for z, _ in self._zones.values()])
+        dist, _ = cKDTree(places).query(
+            pts[margin], distance_upper_bound=self.config.tracking.raw_gate_m
         )
+        labels[margin[np.isfinite(dist)]] = FOREGROUND
+
+    def _zone_of(self, table: ClusterTable) -> NDArray[np.int64]:
+        """(K,) the protected place each small cluster lies in (within ``max_gate_m``), or -1."""
+        tc = self.config.tracking
+        out = np.full(len(table), -1, dtype=np.int64)
+        if not self._zones:
+            return out
+        keys = np.fromiter(self._zones.keys(), dtype=np.int64)
+        places = np.array([z for z, _ in self._zones.values()])
+        d2 = np.sum((table.centroid[:, None, :] - places[None, :, :]) ** 2, axis=2)  # (K,Z)
+        best = np.argmin(d2, axis=1)
+        ok = (d2[np.arange(len(table)), best] <= tc.max_gate_m**2) & (table.extent <= tc.max_size_m)
+        out[ok] = keys[best[ok]]
+        return out
 
     def _decide(self, index: int, stamp_ns: int) -> Estimate:
         """The causal estimate: the active track with the most evidence so far."""
@@ -366,6 +381,8 @@ class TrackEstimator:
             best = self._choice
         if best is None or best_score <= _CAUSAL_MIN_SCORE:
             best = self._choice if self._choice in row else None
+        if best is not None and best == self._choice:
+            best = self._hand_over(best, row, active, index)
         self._choice = best
         if best is None:
             return self._hold(stamp_ns)
@@ -384,6 +401,27 @@ class TrackEstimator:
             n,
             float(np.sqrt(max(active.pos_var[i], 0.0))),
         )
+
+    def _hand_over(self, chosen: int, row: dict[int, int], active: ActiveTracks, index: int) -> int:
+        """The followed track, or the track that took its object this frame.
+
+        When the followed track got nothing this frame but another track got a cluster within
+        the hard gate of it, that track has taken over the object (two tracks on one object:
+        the younger won the assignment); the choice moves to it.
+        """
+        if self._tracker.last_hit(chosen)[0] == index:
+            return chosen
+        here = active.position[row[chosen]]
+        gate2 = self.config.tracking.max_gate_m**2
+        best, best_d2 = chosen, gate2
+        for tid, i in row.items():
+            f, c, _, _ = self._tracker.last_hit(tid)
+            if tid == chosen or f != index or c < 0:
+                continue
+            d2 = float(np.sum((active.position[i] - here) ** 2))
+            if d2 <= best_d2:
+                best, best_d2 = tid, d2
+        return best
 
     def _hold(self, stamp_ns: int) -> Estimate:
         """No track to follow: the last causal estimate held, or the fallback position."""

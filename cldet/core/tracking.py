@@ -47,7 +47,9 @@ class ClusterTable:
     n_points: NDArray[np.int64]  # (K,)
     n_mid360: NDArray[np.int64]  # (K,)
     n_avia: NDArray[np.int64]  # (K,)
-    height: NDArray[np.float64] | None = None  # (K,) lowest point above local ground, m; NaN unknown
+    height: NDArray[np.float64] | None = (
+        None  # (K,) lowest point above local ground, m; NaN unknown
+    )
 
     def heights(self) -> NDArray[np.float64]:
         """(K,) each cluster's height above the local ground, metres (NaN: unknown)."""
@@ -224,7 +226,7 @@ class CandidateTracker:
                     updated[rows] = True
                     owner[cols] = self._ids[rows]
         if raw_points is not None and len(raw_points) and n_tr and not updated.all():
-            self._raw_continue(frame_index, t_s, np.flatnonzero(~updated), raw_points)
+            self._raw_continue(frame_index, t_s, np.flatnonzero(~updated), raw_points, z[assigned])
         new = np.flatnonzero(~assigned)
         if len(new):
             m = len(new)
@@ -253,13 +255,20 @@ class CandidateTracker:
         return owner
 
     def _raw_continue(
-        self, frame_index: int, t_s: float, missed: NDArray[np.int64], raw: NDArray[np.floating]
+        self,
+        frame_index: int,
+        t_s: float,
+        missed: NDArray[np.int64],
+        raw: NDArray[np.floating],
+        taken: NDArray[np.float64],
     ) -> None:
         """Continue confirmed moving tracks that got no cluster on raw points near the prediction.
 
         The raw points within ``raw_gate_m`` of the prediction (or, failing that, of the last
         detection: the drone braked to hover) form the detection when the object is isolated
-        (see ``_isolated_blob``).
+        (see ``_isolated_blob``), and when no cluster taken by another track this frame lies
+        within twice the gate: then this track is a duplicate of that one, and feeding it the
+        object's leftovers (and the structure beside it) would only pull it away.
         """
         cfg = self.cfg
         g = cfg.raw_gate_m
@@ -272,6 +281,8 @@ class CandidateTracker:
             # where it would be: the constant-velocity prediction, or stopped where it was last
             # seen (a drone braking to hover)
             for centre, check_nis in ((self._x[i, :, 0], True), (hits.positions[-1], False)):
+                if len(taken) and np.min(np.sum((taken - centre) ** 2, axis=1)) <= 4 * g * g:
+                    continue
                 zr_n = _isolated_blob(raw, np.asarray(centre, dtype=np.float64), g)
                 if zr_n is None:
                     continue

@@ -364,3 +364,17 @@ def test_a_cluster_cut_by_the_bottom_of_the_field_of_view_may_reach_the_ground()
     off = TrackEstimator(load_config(overrides={"tracking": {"fov_cut_m": 0.0}}))
     off.background.ground.fit(ground)
     assert off._heights((person, drone))[0] == pytest.approx(z_cut + 1.5, abs=0.05)
+
+
+def test_a_frame_flooded_with_speckle_gives_at_most_max_clusters() -> None:
+    rng = np.random.default_rng(0)
+    empty = np.zeros((0, 3), np.float32)
+    frames = [
+        LidarFrame(k * 100_000_000, rng.uniform(-40, 40, (2000, 3)).astype(np.float32), empty)
+        for k in range(4)
+    ]
+    cfg = load_config(overrides={"clustering": {"max_clusters": 50}})
+    dets, result = estimate_sequence(frames, cfg)
+    assert max(len(d.clusters) for d in dets) == 50  # speckle is foreground after warm-up
+    assert all(int(d.labels.max(initial=-1)) < 50 for d in dets)
+    assert len(result.estimates) == 4
