@@ -17,7 +17,8 @@ when the estimator does not give one), ``track`` (the refined track) and ``cl-de
 report's baseline). A sequence fails when its RMS 3D error at the truth stamps exceeds 1 m.
 Printed per method, overall, per scenario kind and per site: sequences, failures with a 95 %
 Wilson interval, MSE per coordinate (sum of squared errors / 3N over all truth rows), mean
-squared 3D distance (sum / N), median and worst RMS.
+squared 3D distance (sum / N), median and worst RMS, and "seen": the median fraction of frames
+with at least one point on the drone (fast passes and high hovers are sparse by design).
 
     python benchmarks/bench_robustness.py --seeds 10000-10119            # development
     python benchmarks/bench_robustness.py                                 # evaluation, 300 worlds
@@ -278,10 +279,12 @@ def table(
         sse = sum(r["sse"] for r in scored)
         n = sum(r["n"] for r in scored)
         crashed = sum(1 for r in scored if r.get("error"))
+        seen = [r["seen"] for r in scored if "seen" in r]
         lines.append(
             f"  {name:16s} {len(rms):4d} {fails:5d} {100 * fails / len(rms):6.1f}% "
             f"[{100 * lo:5.1f}, {100 * hi:5.1f}]% {_fmt(sse / (3 * n), 9)} {_fmt(sse / n, 9)} "
             f"{_fmt(float(np.median(rms)))} {_fmt(float(rms.max()))}"
+            + (f" {100 * float(np.median(seen)):6.0f}%" if seen else "")
             + (f"  ({crashed} crashed)" if crashed else "")
         )
     return lines
@@ -289,7 +292,7 @@ def table(
 
 HEADER = (
     f"  {'group':16s} {'n':>4s} {'fails':>5s} {'rate':>7s} {'95% Wilson':>16s} "
-    f"{'MSE/coord':>9s} {'MSE 3D':>9s} {'med RMS':>8s} {'max RMS':>8s}"
+    f"{'MSE/coord':>9s} {'MSE 3D':>9s} {'med RMS':>8s} {'max RMS':>8s} {'seen':>7s}"
 )
 
 
@@ -300,6 +303,7 @@ def report(rows: list[dict[str, Any]], methods: Sequence[str], duration_s: float
     n_seq = len({r["seed"] for r in rows})
     print(f"\n{n_seq} randomised sequences of {duration_s} s; fail = RMS 3D error > {FAIL_RMS_M} m")
     print("MSE/coord = sum of squared errors / 3N over all truth rows (m^2); MSE 3D = / N (m^2)")
+    print("seen = median fraction of frames with at least one point on the drone (either LiDAR)")
     for method in methods:
         mine = [r for r in rows if r["method"] == method]
         if mine and all(r["rms"] is None for r in mine):

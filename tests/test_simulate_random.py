@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 from cldet.cli import app
 from cldet.core.frames import pair_frames
 from cldet.simulate import PRESETS, simulate_sequence
-from cldet.simulate.actors import plan_world_movers
+from cldet.simulate.actors import observable, plan_world_movers
 from cldet.simulate.flight import DRONE_TYPES
 from cldet.simulate.randomized import simulate_world_frames, write_world_sequence
 from cldet.simulate.terrain import VEGETATION, TerrainScene, build_site
@@ -298,6 +298,18 @@ def test_structure_hover_hovers_near_a_structure(seed: int) -> None:
     out = np.maximum(np.maximum(lo[None] - hover[:, None], hover[:, None] - hi[None]), 0.0)
     near_box = np.linalg.norm(out, axis=2).min(axis=1)
     assert np.median(np.minimum(near_pole, near_box)) < 3.5
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_the_drone_is_observable_most_of_the_time(kind: str) -> None:
+    # in range, inside the tilted sensors' fields of view, not hidden by the static site
+    for seed in (10_100, 10_101):
+        world = replace(draw_world(seed), kind=kind)
+        scene = build_site(world, np.random.default_rng(seed))
+        movers = plan_world_movers(np.random.default_rng(seed + 1), world, scene, 8.0)
+        points = movers[0].track.at(np.arange(0.0, 8.0, 0.4))
+        seen = np.mean([observable(scene, world.rotation(), p) for p in points])
+        assert seen >= (0.25 if kind == "fast_pass" else 0.6), (seed, world.site)
 
 
 def test_speeds_of_every_kind_stay_below_23_m_s_and_birds_overlap() -> None:

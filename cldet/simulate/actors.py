@@ -198,7 +198,7 @@ def _plan_fast_pass(rng: np.random.Generator, world: World, scene: Scene, d: flo
             u = -u
         best = (p_c, u)
         probes = [p_c + speed * dt * u for dt in (-1.0, 0.0, 1.0)]
-        if sum(_visible(scene, q) for q in probes) >= 2 or attempt == 39:
+        if sum(observable(scene, rot, q) for q in probes) >= 2 or attempt == 39:
             break
     if best is None:
         p_c = np.array([20.0, 0.0, 5.0])
@@ -231,15 +231,49 @@ def _hover_waypoints(
     return start, wps
 
 
-def _ok_target(scene: Scene, p: F64) -> bool:
-    """In reach, above the surface and in sight of the sensor."""
+def observable(scene: Scene, rot: F64, p: F64, max_range_m: float = 85.0) -> bool:
+    """Whether a LiDAR could see ``p`` (level frame): in range, in the sensors' fields of view
+    (sensor-frame elevation above the Mid-360's lower edge) and not hidden by the static scene.
+    """
+    r = float(np.linalg.norm(p))
+    if not 0.5 < r <= max_range_m:
+        return False
+    el = float(np.degrees(np.arcsin(float((rot.T @ p)[2]) / r)))
+    return el >= FIELD_ELEVATION_DEG[0] - 1.0 and _visible(scene, p)
+
+
+def _ok_target(scene: Scene, rot: F64, p: F64) -> bool:
+    """In reach, above the surface and observable by the sensor."""
     r = float(np.linalg.norm(p))
     floor = float(_surface(scene, p[:1], p[1:2])[0])
-    return 3.0 < r < 40.0 and p[2] > floor + 0.8 and _visible(scene, p)
+    return 3.0 < r < 40.0 and p[2] > floor + 0.8 and observable(scene, rot, p)
+
+
+def _observable_point(
+    rng: np.random.Generator,
+    scene: Scene,
+    rot: F64,
+    draw: Callable[[], F64],
+    spread_m: float = 0.0,
+    tries: int = 40,
+) -> F64:
+    """A draw of ``draw()`` that the sensor can observe, also ``spread_m`` away horizontally.
+
+    After ``tries`` misses, the last draw.
+    """
+    offsets = np.array([[0.0, 0.0, 0.0], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]])
+    offsets[1:] *= spread_m
+    p = draw()
+    for _ in range(tries):
+        if all(observable(scene, rot, p + o) for o in (offsets if spread_m else offsets[:1])):
+            return p
+        p = draw()
+    return p
 
 
 def _plan_foliage_hover(rng: np.random.Generator, world: World, scene: Scene, d: float) -> Track:
     """A hover 1-3 m from the surface of a swaying canopy or bush (beside or in front of it)."""
+    rot = world.rotation()
     half = 0.5 * max(DRONE_TYPES[world.class_id].size_m)
     idx = [
         i
@@ -262,12 +296,13 @@ def _plan_foliage_hover(rng: np.random.Generator, world: World, scene: Scene, d:
         )
         gap = float(rng.uniform(1.0, 3.0))
         p = c + (r + gap + half) * u + np.array([0.0, 0.0, float(rng.uniform(-0.5, 0.5)) * r])
-        if _ok_target(scene, p):
+        if _ok_target(scene, rot, p):
             target = p
             break
     if target is None:  # nothing suitable: a hover in the open
-        rot = world.rotation()
-        target = _free(rng, scene, lambda: _in_field(rng, rot, 6.0, 15.0))
+        target = _observable_point(
+            rng, scene, rot, lambda: _free(rng, scene, lambda: _in_field(rng, rot, 6.0, 15.0))
+        )
     start, wps = _hover_waypoints(rng, scene, target, d)
     return fly(rng, start, wps, d, scene, float(rng.uniform(2.0, 5.0)))
 
@@ -301,16 +336,18 @@ def _structure_targets(rng: np.random.Generator, scene: Scene) -> list[F64]:
 
 def _plan_structure_hover(rng: np.random.Generator, world: World, scene: Scene, d: float) -> Track:
     """A hover above a pole or antenna top, or beside or above a wall or roof edge."""
+    rot = world.rotation()
     spots = _structure_targets(rng, scene)
     target: F64 | None = None
     for _ in range(60 if spots else 0):
         p = spots[int(rng.integers(len(spots)))]
-        if _ok_target(scene, p) and np.linalg.norm(p) < 30.0:
+        if _ok_target(scene, rot, p) and np.linalg.norm(p) < 30.0:
             target = p
             break
     if target is None:
-        rot = world.rotation()
-        target = _free(rng, scene, lambda: _in_field(rng, rot, 6.0, 15.0))
+        target = _observable_point(
+            rng, scene, rot, lambda: _free(rng, scene, lambda: _in_field(rng, rot, 6.0, 15.0))
+        )
     start, wps = _hover_waypoints(rng, scene, target, d)
     return fly(rng, start, wps, d, scene, float(rng.uniform(2.0, 5.0)))
 
@@ -318,7 +355,7 @@ def _plan_structure_hover(rng: np.random.Generator, world: World, scene: Scene, 
 def _plan_high_hover(rng: np.random.Generator, world: World, scene: Scene, d: float) -> Track:
     """A hover 30-80 m up inside the Avia cone, drifting a metre or two."""
     rot = world.rotation()
-    start = _in_cone(rng, rot, 30.0, 80.0)
+    start = _observable_point(rng, scene, rot, lambda: _in_cone(rng, rot, 30.0, 80.0), 2.5)
     wps: list[_Waypoint] = []
     t = 0.0
     while t < d + 2:
@@ -334,9 +371,11 @@ def _plan_mixed(rng: np.random.Generator, world: World, scene: Scene, d: float) 
     """Varied flight: the Mid-360's band, the Avia cone, far away, near, hovers; 1-15 m/s."""
     rot = world.rotation()
     if rng.random() < 0.4:
-        start = _in_cone(rng, rot, 8.0, 60.0)
+        start = _observable_point(rng, scene, rot, lambda: _in_cone(rng, rot, 8.0, 60.0))
     else:
-        start = _free(rng, scene, lambda: _in_field(rng, rot, 5.0, 40.0))
+        start = _observable_point(
+            rng, scene, rot, lambda: _free(rng, scene, lambda: _in_field(rng, rot, 5.0, 40.0))
+        )
     wps: list[_Waypoint] = []
     t = 0.0
     last = start
@@ -369,11 +408,9 @@ def _plan_mixed(rng: np.random.Generator, world: World, scene: Scene, d: float) 
 def _plan_close(rng: np.random.Generator, world: World, scene: Scene, d: float) -> Track:
     """A slow flight 2-10 m from the sensor (in the band and in the lower cone), 0.5-6 m/s."""
     rot = world.rotation()
-    start = _free(rng, scene, lambda: _in_field(rng, rot, 3.0, 9.0), 0.8)
-    for _ in range(20):
-        if _visible(scene, start):
-            break
-        start = _free(rng, scene, lambda: _in_field(rng, rot, 3.0, 9.0), 0.8)
+    start = _observable_point(
+        rng, scene, rot, lambda: _free(rng, scene, lambda: _in_field(rng, rot, 3.0, 9.0), 0.8)
+    )
     wps: list[_Waypoint] = []
     t = 0.0
     last = start
