@@ -125,8 +125,21 @@ class TrackingConfig(BaseModel):
     )
     gate_chi2: float = Field(default=16.0, gt=0, description="Mahalanobis gate (3 dof)")
     max_gate_m: float = Field(default=3.0, gt=0, description="hard Euclidean gate")
+    gate_speed: float = Field(
+        default=0.0,
+        ge=0,
+        description="the hard gate grows by this speed (m/s) times the time a track was unseen"
+        " beyond one scan",
+    )
     max_miss_s: float = Field(
         default=1.5, gt=0, description="a candidate track ends after this unseen"
+    )
+    static_factor: float = Field(
+        default=0.6,
+        gt=0,
+        le=1,
+        description="score factor of a track that goes nowhere (static clutter, or a drone"
+        " hovering all along: a real mover wins)",
     )
     static_spread_m: float = Field(
         default=0.5,
@@ -138,6 +151,21 @@ class TrackingConfig(BaseModel):
         gt=0,
         description="tracks faster than this (90th percentile) are not a drone (DJI drones"
         " cruise at 15-23 m/s)",
+    )
+    mid360_points_per_sr: float = Field(
+        default=3000.0,
+        gt=0,
+        description="Mid-360 points per steradian of surface per scan (a drone of area A at"
+        " range r returns about this * A / r^2 points)",
+    )
+    avia_points_per_sr: float = Field(
+        default=14000.0, gt=0, description="the same for the Avia (about 4.7x denser)"
+    )
+    min_cross_section_m2: float = Field(
+        default=0.02,
+        gt=0,
+        description="detections whose points / density * r^2 is below this weigh less, down to"
+        " 0.1 (a lone return near the sensor: rain, dust, a leaf)",
     )
     max_size_m: float = Field(
         default=1.2, gt=0, description="clusters larger than this are not a drone"

@@ -56,8 +56,8 @@ from cldet.core.bias import apply_bias
 from cldet.core.clustering import cluster_points, summarize_clusters
 from cldet.core.frames import valid_points
 from cldet.core.selection import (
-    STATIC_FACTOR,
     ScoredTrack,
+    cross_section,
     detection_weights,
     score_tracks,
     select_chain,
@@ -160,11 +160,11 @@ class _Evidence:
         np.minimum(self.lower, position, out=self.lower)
         np.maximum(self.upper, position, out=self.upper)
 
-    def score(self, static_spread_m: float) -> float:
+    def score(self, static_spread_m: float, static_factor: float) -> float:
         """Running evidence; "static" is judged once the track has lived ``_JUDGE_STATIC_S``."""
         moved = float(np.max(self.upper - self.lower)) if self.hits else 0.0
         judged = self.last_t_s - self.first_t_s >= _JUDGE_STATIC_S
-        factor = STATIC_FACTOR if judged and moved < 2.0 * static_spread_m else 1.0
+        factor = static_factor if judged and moved < 2.0 * static_spread_m else 1.0
         return self.weight * factor * (1.0 + 0.5 * self.both / max(self.hits, 1))
 
 
@@ -287,6 +287,7 @@ class TrackEstimator:
                 table.heights(),
                 np.zeros(len(owner), dtype=bool),
                 np.array([tracker.last_hit(int(t))[3] for t in owner]),
+                cross_section(table.n_mid360, table.n_avia, table.centroid, tc),
                 tc,
             )
             both = (table.n_mid360 > 0) & (table.n_avia > 0)
@@ -317,8 +318,14 @@ class TrackEstimator:
             f, c, pos, nis = tracker.last_hit(tid)
             if f != index or c >= 0:
                 continue
+            n_raw = np.array([tracker.last_points(tid)])
             w = detection_weights(
-                np.zeros(1), np.full(1, np.nan), np.ones(1, dtype=bool), np.array([nis]), tc
+                np.zeros(1),
+                np.full(1, np.nan),
+                np.ones(1, dtype=bool),
+                np.array([nis]),
+                cross_section(n_raw, np.zeros(1, dtype=np.int64), pos[None, :], tc),
+                tc,
             )
             self._evidence.setdefault(tid, _Evidence()).add(t_s, float(w[0]), pos, False)
             if protect:
@@ -368,7 +375,7 @@ class TrackEstimator:
             if ev is None:
                 continue
             row[tid] = i
-            sc = ev.score(tc.static_spread_m)
+            sc = ev.score(tc.static_spread_m, tc.static_factor)
             if tid == self._choice:
                 current_score = sc
             # ties (young tracks) go to the one seen with more points now: the surer object

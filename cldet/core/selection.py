@@ -15,9 +15,13 @@ each detection weighted by per-detection evidence and the track's factors:
   view, or whose continuation one cell below is hidden by the ground's background margin (a
   person far out shows only head and shoulders). Unknown height (no ground fitted) weighs 1;
 * raw: a detection from the raw-point gate (no cluster) weighs ``raw_weight`` (0.5);
+* cross-section: a LiDAR puts a fixed number of points per steradian on a surface per scan, so
+  points / density * range^2 is the area that returned them; below ``min_cross_section_m2``
+  (0.02 m^2, a small drone edge-on) a detection weighs that fraction, down to 0.1: a lone
+  return 3 m away comes from a rain drop, dust or a leaf (a drone there returns a dozen);
 * speed: factor 0.1 when the track's 90th-percentile filtered speed exceeds ``max_speed``
   (30 m/s: DJI drones cruise at 15-23 m/s, so speed alone never makes a drone a bird);
-* static: factor 0.3 when 90 % of its detections lie within ``static_spread_m`` (0.5 m) of
+* static: factor ``static_factor`` (0.6) when 90 % of its detections lie within ``static_spread_m`` (0.5 m) of
   their median (sparse returns from different parts of one object scatter its centroid), or
   when they scatter less than 2 m but a least-squares constant-velocity fit moves them less
   than ``static_spread_m`` over the track's span (a swaying or flickering clump far away):
@@ -47,9 +51,14 @@ from numpy.typing import NDArray
 from cldet.config import TrackingConfig
 from cldet.core.tracking import ClusterTable, TrackRecord
 
-__all__ = ["ScoredTrack", "detection_weights", "score_tracks", "select_chain"]
+__all__ = [
+    "ScoredTrack",
+    "cross_section",
+    "detection_weights",
+    "score_tracks",
+    "select_chain",
+]
 
-STATIC_FACTOR = 0.3  # score factor of a track that goes nowhere
 _LINK_COST = 2.0
 _NIS95 = 7.81  # 95 % point of chi^2 with 3 degrees of freedom
 _JITTER_M = 2.0  # a track scattered less than this that goes nowhere is static clutter
@@ -76,19 +85,41 @@ def _net_motion(t: NDArray[np.float64], pos: NDArray[np.float64]) -> float:
     return float(np.linalg.norm(velocity)) * span
 
 
+def cross_section(
+    n_mid360: NDArray[np.integer],
+    n_avia: NDArray[np.integer],
+    positions: NDArray[np.float64],
+    cfg: TrackingConfig,
+) -> NDArray[np.float64]:
+    """(H,) the area (m^2) that returned these points at this range: points / density * r^2.
+
+    A LiDAR puts a fixed number of points per steradian on a surface in each scan
+    (``mid360_points_per_sr``, ``avia_points_per_sr``), so an object of projected area A at
+    range r returns about density * A / r^2 points.
+    """
+    r2 = np.einsum("ij,ij->i", positions, positions)
+    return (n_mid360 / cfg.mid360_points_per_sr + n_avia / cfg.avia_points_per_sr) * r2
+
+
 def detection_weights(
     extent: NDArray[np.float64],
     height: NDArray[np.float64],
     raw: NDArray[np.bool_],
     nis: NDArray[np.float64],
+    cross: NDArray[np.float64],
     cfg: TrackingConfig,
 ) -> NDArray[np.float64]:
-    """Per-detection evidence: size, height above the local ground, raw gate, motion consistency.
+    """Per-detection evidence: size, height above the local ground, raw gate, motion
+    consistency, cross-section.
 
     Args: (H,) cluster box extent (m), lowest point's height above the local ground (m, NaN
-    unknown), from the raw gate, normalised innovation squared (NaN at a track's birth).
+    unknown), from the raw gate, normalised innovation squared (NaN at a track's birth), the
+    cross-section that returned the points (m^2, ``cross_section``).
     """
     per_det = np.where(extent <= cfg.max_size_m, 1.0, 0.1)
+    # a lone return near the sensor comes from something far smaller than any drone (a rain
+    # drop, a leaf, dust): a drone at 3 m returns a dozen points
+    per_det *= np.clip(cross / cfg.min_cross_section_m2, 0.1, 1.0)
     lo_h, hi_h = cfg.min_height_m - 1.0, cfg.min_height_m
     with np.errstate(invalid="ignore"):
         height_w = np.clip((height - lo_h) / (hi_h - lo_h), 0.1, 1.0)
@@ -117,12 +148,16 @@ def score_tracks(
         extent = np.zeros(h)
         height = np.full(h, np.nan)
         both = np.zeros(h, dtype=bool)
+        n_mid = rec.n_points.copy()  # raw-gate points: counted as the sparser Mid-360's
+        n_avia = np.zeros(h, dtype=np.int64)
         for k in np.flatnonzero(~raw):
             table, c = tables[rec.frames[k]], rec.clusters[k]
             extent[k] = table.extent[c]
             height[k] = table.heights()[c]
             both[k] = table.n_mid360[c] > 0 and table.n_avia[c] > 0
-        per_det = detection_weights(extent, height, raw, rec.nis, cfg)
+            n_mid[k], n_avia[k] = table.n_mid360[c], table.n_avia[c]
+        cross = cross_section(n_mid, n_avia, pos, cfg)
+        per_det = detection_weights(extent, height, raw, rec.nis, cross, cfg)
         factor = 1.0
         speeds = rec.speed[2:] if h > 3 else rec.speed[1:]
         if len(speeds) and np.percentile(speeds, 90) > cfg.max_speed:
@@ -132,7 +167,7 @@ def score_tracks(
         if spread < cfg.static_spread_m or (
             spread < _JITTER_M and _net_motion(times_s[rec.frames], pos) < cfg.static_spread_m
         ):
-            factor *= STATIC_FACTOR
+            factor *= cfg.static_factor
         factor *= 1.0 + 0.5 * float(np.mean(both))
         contribution = per_det * factor
         contribution[0] = 0.0  # a track's first detection is no evidence of persistence

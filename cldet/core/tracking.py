@@ -198,7 +198,11 @@ class CandidateTracker:
             d2 = np.einsum("tkd,tkd->tk", diff, diff)
             s = self._P[:, 0, 0][:, None] + r2  # (T,1)
             nis = d2 / s
-            ok = (nis <= cfg.gate_chi2) & (d2 <= cfg.max_gate_m**2)
+            # the hard gate grows with the time unseen at the drone's top speed: a fast drone
+            # seen every few scans jumps metres between its detections
+            unseen = t_s - self._last_t
+            hard = cfg.max_gate_m + cfg.gate_speed * np.maximum(unseen - 0.1, 0.0)
+            ok = (nis <= cfg.gate_chi2) & (d2 <= (hard**2)[:, None])
             if ok.any():
                 cost = np.where(ok, nis, 1e9)
                 rows, cols = linear_sum_assignment(cost)
@@ -321,6 +325,10 @@ class CandidateTracker:
         """A track's latest detection: frame index, cluster index (-1: raw gate), position, NIS."""
         hits = self._hits[track_id]
         return hits.frames[-1], hits.clusters[-1], hits.positions[-1], hits.nis[-1]
+
+    def last_points(self, track_id: int) -> int:
+        """Points in a track's latest detection."""
+        return self._hits[track_id].n_points[-1]
 
     def record(self, track_id: int) -> TrackRecord:
         """One candidate track's detections so far."""
