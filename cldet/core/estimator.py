@@ -389,7 +389,7 @@ class TrackEstimator:
         if best is None or best_score <= _CAUSAL_MIN_SCORE:
             best = self._choice if self._choice in row else None
         if best is not None and best == self._choice:
-            best = self._hand_over(best, row, active, index)
+            best = self._hand_over(int(best), row, active, index)
         self._choice = best
         if best is None:
             return self._hold(stamp_ns)
