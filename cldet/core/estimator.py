@@ -367,7 +367,8 @@ class TrackEstimator:
         """The causal estimate: the active track with the most evidence so far."""
         tc = self.config.tracking
         active = self._tracker.active()
-        best, best_key, current_score = None, (0.0, 0), 0.0
+        best: int | None = None
+        best_key, current_score = (0.0, 0), 0.0
         row = {}
         table = self._tables[index]
         for i, tid in enumerate(active.ids.tolist()):
@@ -389,7 +390,7 @@ class TrackEstimator:
         if best is None or best_score <= _CAUSAL_MIN_SCORE:
             best = self._choice if self._choice in row else None
         if best is not None and best == self._choice:
-            best = self._hand_over(int(best), row, active, index)
+            best = self._hand_over(best, row, active, index)
         self._choice = best
         if best is None:
             return self._hold(stamp_ns)
