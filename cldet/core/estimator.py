@@ -148,6 +148,7 @@ class _Evidence:
     both: int = 0  # detections seen by both LiDARs in one cluster
     lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
     upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
+    moved: float = 0.0  # largest edge of the box around its detections, metres
 
     def add(self, t_s: float, weight: float, position: NDArray[np.float64], both: bool) -> None:
         if self.hits:
@@ -159,10 +160,11 @@ class _Evidence:
         self.both += int(both)
         np.minimum(self.lower, position, out=self.lower)
         np.maximum(self.upper, position, out=self.upper)
+        self.moved = float(np.max(self.upper - self.lower))
 
     def score(self, static_spread_m: float, static_factor: float) -> float:
         """Running evidence; "static" is judged once the track has lived ``_JUDGE_STATIC_S``."""
-        moved = float(np.max(self.upper - self.lower)) if self.hits else 0.0
+        moved = self.moved
         judged = self.last_t_s - self.first_t_s >= _JUDGE_STATIC_S
         factor = static_factor if judged and moved < 2.0 * static_spread_m else 1.0
         return self.weight * factor * (1.0 + 0.5 * self.both / max(self.hits, 1))

@@ -27,10 +27,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
+from scipy.spatial import cKDTree
 
 from cldet.config import TrackingConfig
 from cldet.types import Cluster
@@ -115,6 +115,7 @@ class _Hits:
     last_extent: float = 0.0
     lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
     upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
+    spread: float = 0.0  # largest edge of the box around its cluster detections, metres
 
     def add(
         self,
@@ -137,12 +138,13 @@ class _Hits:
             self.last_extent = extent
             np.minimum(self.lower, pos, out=self.lower)
             np.maximum(self.upper, pos, out=self.upper)
+            self.spread = float(np.max(self.upper - self.lower))
 
     def may_use_raw(self, min_hits: int, min_spread_m: float, max_size_m: float) -> bool:
         return (
             self.n_cluster_hits >= min_hits
             and self.last_extent <= max_size_m
-            and float(np.max(self.upper - self.lower)) >= min_spread_m
+            and self.spread >= min_spread_m
         )
 
 
@@ -154,6 +156,7 @@ class CandidateTracker:
         self._x = np.zeros((0, 3, 2))  # states of active tracks
         self._P = np.zeros((0, 2, 2))
         self._last_t = np.zeros(0)  # last update time, s
+        self._raw_ok: set[int] = set()  # ids of the tracks the raw gate may continue
         self._ids = np.zeros(0, dtype=np.int64)
         self._hits: dict[int, _Hits] = {}
         self._t: float | None = None
@@ -183,6 +186,7 @@ class CandidateTracker:
             self._P = F @ self._P @ F.T + Q
             keep = t_s - self._last_t <= cfg.max_miss_s
             if not keep.all():
+                self._raw_ok.difference_update(self._ids[~keep].tolist())
                 self._x, self._P = self._x[keep], self._P[keep]
                 self._last_t, self._ids = self._last_t[keep], self._ids[keep]
         self._t = t_s
@@ -226,6 +230,7 @@ class CandidateTracker:
                             float(speeds[a]),
                             float(table.extent[j]),
                         )
+                        self._judge_raw(int(self._ids[i]))
                     assigned[cols] = True
                     updated[rows] = True
                     owner[cols] = self._ids[rows]
@@ -251,6 +256,8 @@ class CandidateTracker:
                     float(table.extent[j]),
                 )
                 self._hits[int(tid)] = hits
+                if cfg.raw_min_cluster_hits <= 1:
+                    self._judge_raw(int(tid))
             self._x = np.concatenate([self._x, x])
             self._P = np.concatenate([self._P, P])
             self._last_t = np.concatenate([self._last_t, np.full(m, t_s)])
@@ -268,6 +275,8 @@ class CandidateTracker:
     ) -> None:
         """Continue confirmed moving tracks that got no cluster on raw points near the prediction.
 
+        Only the tracks ``_judge_raw`` admitted are continued.
+
         The raw points within ``raw_gate_m`` of the prediction (or, failing that, of the last
         detection: the drone braked to hover) form the detection when the object is isolated
         (see ``_isolated_blob``), and when no cluster taken by another track this frame lies
@@ -278,16 +287,20 @@ class CandidateTracker:
         g = cfg.raw_gate_m
         if g <= 0:
             return
-        for i in missed:
+        tree: cKDTree | None = None  # built once, when a track first needs it
+        if not self._raw_ok:
+            return
+        ok_ids = np.fromiter(self._raw_ok, dtype=np.int64, count=len(self._raw_ok))
+        for i in missed[np.isin(self._ids[missed], ok_ids)]:
             hits = self._hits[int(self._ids[i])]
-            if not hits.may_use_raw(cfg.raw_min_cluster_hits, cfg.raw_min_spread_m, cfg.max_size_m):
-                continue
             # where it would be: the constant-velocity prediction, or stopped where it was last
             # seen (a drone braking to hover)
             for centre, check_nis in ((self._x[i, :, 0], True), (hits.positions[-1], False)):
                 if len(taken) and np.min(np.sum((taken - centre) ** 2, axis=1)) <= 4 * g * g:
                     continue
-                zr_n = _isolated_blob(raw, np.asarray(centre, dtype=np.float64), g)
+                if tree is None:
+                    tree = cKDTree(raw)
+                zr_n = _isolated_blob(raw, tree, np.asarray(centre, dtype=np.float64), g)
                 if zr_n is None:
                     continue
                 zr, n_in = zr_n
@@ -302,6 +315,22 @@ class CandidateTracker:
                 self._last_t[i] = t_s
                 hits.add(frame_index, -1, zr, n_in, nis, float(np.linalg.norm(self._x[i, :, 1])))
                 break
+
+    def _judge_raw(self, track_id: int) -> None:
+        """After a cluster hit: may the raw gate continue this track? (confirmed, drone-sized,
+        it has moved, and its last detection had a drone's cross-section, counted as Mid-360
+        points: speckle tracks are not worth the search)."""
+        cfg = self.cfg
+        hits = self._hits[track_id]
+        last = hits.positions[-1]
+        ok = hits.may_use_raw(cfg.raw_min_cluster_hits, cfg.raw_min_spread_m, cfg.max_size_m)
+        ok = ok and hits.n_points[-1] / cfg.mid360_points_per_sr * float(last @ last) >= (
+            cfg.min_cross_section_m2
+        )
+        if ok:
+            self._raw_ok.add(track_id)
+        else:
+            self._raw_ok.discard(track_id)
 
     def active(self) -> ActiveTracks:
         """The active tracks' filtered states at the last ``step``."""
@@ -352,40 +381,24 @@ def _to_record(tid: int, h: _Hits) -> TrackRecord:
     )
 
 
-@numba.njit(cache=True)
-def _blob_kernel(
-    raw: NDArray[np.float32], centre: NDArray[np.float64], gate_m: float
-) -> tuple[int, int, NDArray[np.float64]]:
-    g2 = gate_m * gate_m
-    n_in = 0
-    n_shell = 0
-    acc = np.zeros(3)
-    for i in range(raw.shape[0]):
-        dx = raw[i, 0] - centre[0]
-        dy = raw[i, 1] - centre[1]
-        dz = raw[i, 2] - centre[2]
-        d2 = dx * dx + dy * dy + dz * dz
-        if d2 <= g2:
-            n_in += 1
-            acc[0] += raw[i, 0]
-            acc[1] += raw[i, 1]
-            acc[2] += raw[i, 2]
-        elif d2 <= 4.0 * g2 and dz >= -0.5 * gate_m:
-            n_shell += 1
-    return n_in, n_shell, acc
-
-
 def _isolated_blob(
-    raw: NDArray[np.floating], centre: NDArray[np.float64], gate_m: float
+    raw: NDArray[np.floating], tree: cKDTree, centre: NDArray[np.float64], gate_m: float
 ) -> tuple[NDArray[np.float64], int] | None:
     """Mean and count of the raw points within ``gate_m`` of ``centre`` if they are isolated.
 
     Isolated: no more points in the shell ``gate_m..2 gate_m`` around the centre than in the
     gate itself, ignoring what lies below (a car roof, a lamp post under a hovering drone).
-    A wall, a tree or the ground fails the test.
+    A wall, a tree or the ground fails the test. ``tree`` indexes ``raw``.
     """
-    pts = np.ascontiguousarray(raw, dtype=np.float32)
-    n_in, n_shell, acc = _blob_kernel(pts, np.ascontiguousarray(centre, dtype=np.float64), gate_m)
+    near = np.asarray(tree.query_ball_point(centre, 2.0 * gate_m), dtype=np.intp)
+    if len(near) == 0:
+        return None
+    p = np.asarray(raw[near], dtype=np.float64)
+    d = p - centre
+    d2 = np.einsum("ij,ij->i", d, d)
+    inside = d2 <= gate_m * gate_m
+    n_in = int(inside.sum())
+    n_shell = int(np.sum(~inside & (d[:, 2] >= -0.5 * gate_m)))
     if n_in == 0 or n_shell > n_in:
         return None
-    return acc / n_in, int(n_in)
+    return p[inside].mean(axis=0), n_in
