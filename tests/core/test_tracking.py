@@ -143,3 +143,21 @@ def test_a_flickering_clump_that_goes_nowhere_loses_to_a_sparse_far_mover() -> N
     clump = max((s for s in scored if s.positions[0, 0] < 0), key=lambda s: s.score)
     drone = max((s for s in scored if s.positions[0, 0] > 0), key=lambda s: s.score)
     assert clump.score < 0.5 * drone.score
+
+
+def test_lone_returns_near_the_sensor_lose_to_a_hovering_drone_by_cross_section() -> None:
+    # rain: one return a frame a few metres out, each near the last (a track hops from drop to
+    # drop), against a Mavic-sized drone hovering 12 m out (6 points a frame, static)
+    rng = np.random.default_rng(5)
+    tables = []
+    drop = np.array([2.5, 1.0, 1.0])
+    for _ in range(60):
+        drop = drop + rng.normal(0, 0.15, 3)
+        drone = np.array([12.0, -3.0, 4.0]) + rng.normal(0, 0.03, 3)
+        tables.append(_table([(drop.copy(), 0.0, 1), (drone, 0.3, 6)]))
+    on = TrackingConfig()
+    off = TrackingConfig(min_cross_section_m2=1e-9)
+    for cfg, drone_wins in ((on, True), (off, False)):
+        _, chain = _run(tables, cfg)
+        assert chain
+        assert all(tr.positions[0, 0] > 10 for tr, _, _ in chain) == drone_wins
