@@ -85,6 +85,12 @@ class BackgroundConfig(BaseModel):
         ge=0,
         description="static blobs this small floating in free space are not background (0: off)",
     )
+    reclaim_m: float = Field(
+        default=0.6,
+        ge=0,
+        description="dilation-margin points this close to where a protected mover was just seen"
+        " are foreground",
+    )
     protect_tracks: bool = Field(
         default=True,
         description="points of confirmed small moving tracks are not learned as background (a"
@@ -186,7 +192,10 @@ class TrackingConfig(BaseModel):
     )
     link_speed: float = Field(default=10.0, gt=0, description="max mean speed across a bridged gap")
     raw_gate_m: float = Field(
-        default=0.6, ge=0, description="raw-point search radius around a prediction (0: off)"
+        default=0.0,
+        ge=0,
+        description="raw-point search radius around a confirmed mover's prediction (0: off; the"
+        " background's protect_tracks keeps a hovering drone in the foreground instead)",
     )
     raw_min_cluster_hits: int = Field(
         default=2, ge=1, description="cluster detections before a track may use raw points"

@@ -347,7 +347,7 @@ class TrackEstimator:
             return
         places = np.array([z for z, _ in self._zones.values()])
         dist, _ = cKDTree(places).query(
-            pts[margin], distance_upper_bound=self.config.tracking.raw_gate_m
+            pts[margin], distance_upper_bound=self.config.background.reclaim_m
         )
         labels[margin[np.isfinite(dist)]] = FOREGROUND
 

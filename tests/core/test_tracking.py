@@ -90,7 +90,7 @@ def test_chain_bridges_a_long_unseen_stretch() -> None:
 
 
 def test_raw_points_keep_a_confirmed_mover_alive() -> None:
-    cfg = TrackingConfig()
+    cfg = TrackingConfig(raw_gate_m=0.6)  # the raw gate is off by default
     tracker = CandidateTracker(cfg)
     rng = np.random.default_rng(2)
     stop = np.array([6.0, 2.0, 3.0])
@@ -110,7 +110,7 @@ def test_raw_points_keep_a_confirmed_mover_alive() -> None:
 
 
 def test_raw_points_of_a_wall_do_not() -> None:
-    cfg = TrackingConfig()
+    cfg = TrackingConfig(raw_gate_m=0.6)  # the raw gate is off by default
     tracker = CandidateTracker(cfg)
     yy, zz = np.meshgrid(np.linspace(-3, 3, 40), np.linspace(0, 4, 30))
     wall = np.stack([np.full(yy.size, 8.0), yy.ravel(), zz.ravel()], axis=1)
