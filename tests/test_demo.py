@@ -20,14 +20,10 @@ def test_demo_runs_end_to_end_and_prints_both_scores(tmp_path: Path) -> None:
     assert header.split()[1:] == ["track", "cl-det"]
     mse = next(line for line in result.output.splitlines() if line.startswith("MSE per coordinate"))
     track_mse, cldet_mse = (float(v) for v in mse.split()[-2:])
+    assert track_mse < cldet_mse
     for method in ("track", "cl-det"):
         assert (root / method / "mmaud_results.csv").is_file()
     assert "rerun " in result.output and list((root / "track").glob("*.rrd"))
     # a second run reuses the dataset and still works
     again = CliRunner().invoke(app, ["demo", str(root), "--workers", "1"])
     assert again.exit_code == 0, again.output
-    if not track_mse < cldet_mse:
-        pytest.xfail(
-            f"known regression of estimator v2 (issue 11): on the demo dataset track's MSE per"
-            f" coordinate {track_mse} is not below cl-det's {cldet_mse}"
-        )

@@ -221,3 +221,19 @@ def test_hidden_below_is_true_where_the_ground_margin_would_swallow_what_continu
     )
     assert np.all(model.classify(points) == FOREGROUND)  # all four are seen
     assert model.hidden_below(points).tolist() == [True, False, False, False]
+
+
+def test_a_ceiling_right_above_is_learned_as_background() -> None:
+    # a tilted mount under a roof or a canopy puts static surface at the zenith, where the
+    # direction cells are slivers: it must still be learned (and not released as floating)
+    ceiling = ((-8.0, -8.0, 3.0), (8.0, 8.0, 3.3))
+
+    def cone(rng: np.random.Generator) -> np.ndarray:
+        return scan(rng, n_rays=6000, wall=False, el_range_deg=(52.0, 90.0), boxes=[ceiling])
+
+    rng = np.random.default_rng(7)
+    model = _feed(BackgroundModel(BackgroundConfig()), [cone(rng) for _ in range(60)])
+    pts = cone(np.random.default_rng(8))
+    up = np.degrees(np.arcsin(pts[:, 2] / np.linalg.norm(pts, axis=1))) > 80.0
+    assert up.sum() > 200
+    assert np.mean(model.classify(pts)[up] != FOREGROUND) > 0.99

@@ -98,15 +98,7 @@ def _run(
 @pytest.mark.parametrize(
     "scenario",
     [
-        pytest.param(
-            "mixed",
-            marks=pytest.mark.xfail(
-                strict=False,
-                reason="known failure of estimator v2 (issue 11): mixed seed 302 follows the"
-                " wrong object (33 m); failure rates are measured over many worlds by"
-                " benchmarks/bench_robustness.py, not by three seeds",
-            ),
-        ),
+        "mixed",
         "close_pass",
         "hover",
         "avia_only",
