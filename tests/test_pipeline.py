@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 from cldet.cli import app
 from cldet.config import CldetConfig
 from cldet.core import estimator as estimator_module
-from cldet.errors import ConfigError, LogError
+from cldet.errors import ConfigError, FrameOrderError, LogError
 from cldet.io import topics
 from cldet.io.mcap_read import iter_estimates, list_topics, read_metadata
 from cldet.io.mcap_write import LogWriter
@@ -238,3 +238,21 @@ def test_annotate_reads_the_log_once_and_writes_the_causal_estimate(
     causal = [m for m in messages if m[0] == "/cldet/causal"]
     refined = [m for m in messages if m[0] == "/cldet/estimate"]
     assert len(causal) == len(refined) == report.frames
+
+
+def test_two_clouds_with_one_stamp_are_a_clear_error_and_the_cli_goes_on(tmp_path: Path) -> None:
+    # another tool's log: two /lidar_360 clouds share a stamp
+    bad = tmp_path / "dup.mcap"
+    rng = np.random.default_rng(0)
+    with open(bad, "wb") as f, LogWriter(f) as writer:
+        for stamp in (1_000_000_000, 1_100_000_000, 1_100_000_000, 1_200_000_000):
+            pts = rng.uniform(-5, 5, (50, 3)).astype(np.float32)
+            writer.write_cloud(topics.LIDAR_360, stamp, pts, topics.FRAME_MID360)
+    before = bad.read_bytes()
+    with pytest.raises(FrameOrderError, match=r"dup\.mcap: frame stamped 1100000000 ns repeats"):
+        annotate_log(bad, write_rrd=False)
+    assert bad.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dup.mcap"]
+    result = CliRunner().invoke(app, ["annotate", str(bad), "--no-rrd"])
+    assert result.exit_code != 0
+    assert "repeats the stamp" in result.output and "Traceback" not in result.output
