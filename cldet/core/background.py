@@ -397,6 +397,10 @@ class BackgroundModel:
         if not self.warm:
             return np.full(len(points), CORE, dtype=np.uint8)
         cells, rng, _, _ = direction_cells(points, self.cfg.cell_deg)
+        return self._labels(cells, rng)
+
+    def _labels(self, cells: NDArray[np.int64], rng: NDArray[np.float32]) -> NDArray[np.uint8]:
+        """FOREGROUND / MARGIN / CORE of returns at these cells and ranges."""
         return _classify_kernel(
             cells,
             rng,
@@ -426,18 +430,7 @@ class BackgroundModel:
         scale = np.where(h > 0, r * np.cos(el) / np.maximum(h, 1e-9), 0.0)
         probe = np.stack([p[:, 0] * scale, p[:, 1] * scale, r * np.sin(el)], axis=1)
         cells, rng, _, _ = direction_cells(probe.astype(np.float32), self.cfg.cell_deg)
-        hidden = (
-            _classify_kernel(
-                cells,
-                rng,
-                self._static,
-                self._dilated,
-                self._slack,
-                self.cfg.margin_m,
-                self.cfg.margin_fraction,
-            )
-            != FOREGROUND
-        )
+        hidden = self._labels(cells, rng) != FOREGROUND
         # ... by the ground: a drone hovering over a car or a pole top has them right below
         behind = self._dilated[cells].astype(np.float64)  # the nearest static surface around
         surface = (
