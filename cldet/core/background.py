@@ -305,7 +305,10 @@ class BackgroundModel:
         self._n_az = int(round(360.0 / cfg.cell_deg))
         self._n_el = int(np.ceil(180.0 / cfg.cell_deg))
         n_cells = self._n_el * self._n_az
-        self._ring = np.full((cfg.window_bins, n_cells), np.inf, dtype=np.float32)
+        # per cell, its nearest range in each of the last bins (cell-major: the order statistic
+        # runs along contiguous memory)
+        self._ring = np.full((n_cells, cfg.window_bins), np.inf, dtype=np.float32)
+        self._seen = np.zeros(n_cells, dtype=bool)  # cells ever hit in a finished bin
         self._current = np.full(n_cells, np.inf, dtype=np.float32)
         self._bin_ns = max(1, int(round(cfg.bin_s * 1e9)))
         self._bin_end_ns: int | None = None
@@ -330,7 +333,8 @@ class BackgroundModel:
             return
         if stamp_ns < self._bin_end_ns:
             return
-        self._ring[self.n_bins % self.cfg.window_bins] = self._current
+        self._ring[:, self.n_bins % self.cfg.window_bins] = self._current
+        self._seen |= np.isfinite(self._current)
         self.n_bins += 1
         self._current = np.full_like(self._current, np.inf)
         # after a gap the next bin starts at this frame
@@ -353,8 +357,10 @@ class BackgroundModel:
         cfg = self.cfg
         b = min(self.n_bins, cfg.window_bins)
         k = max(1, int(np.floor(cfg.static_fraction * b + 0.5)))
-        window = self._ring[:b]
-        kth = np.partition(window, k - 1, axis=0)[k - 1] if b > 1 else window[0]
+        seen = np.flatnonzero(self._seen)  # the rest (outside every field of view) stays inf
+        kth = np.full(len(self._seen), np.inf, dtype=np.float32)
+        window = self._ring[seen, :b]
+        kth[seen] = np.partition(window, k - 1, axis=1)[:, k - 1] if b > 1 else window[:, 0]
         static = kth.reshape(self._n_el, self._n_az)
         self.floating_cells = 0
         if cfg.floating_max_size_m > 0:
