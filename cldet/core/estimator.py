@@ -235,7 +235,7 @@ class TrackEstimator:
         owner = self._tracker.step(index, t_s, table, pts)
         keep = self._account(index, t_s, table, owner, labels, fg_idx, pts)
         bg.update(frame.stamp_ns, pts if keep is None else pts[keep])
-        estimate = self._decide(index, frame.stamp_ns)
+        estimate = self._decide(index, frame.stamp_ns, owner)
         self._causal.append(estimate)
         return FrameDetections(
             stamp_ns=frame.stamp_ns,
@@ -314,6 +314,8 @@ class TrackEstimator:
                     keep = np.ones(len(pts), dtype=bool)
                 keep[fg_idx[labels == j]] = False
         # raw-gate detections of this frame (tracks that got no cluster)
+        if tc.raw_gate_m <= 0:
+            return keep
         active = tracker.active()
         gate2 = tc.raw_gate_m**2
         for tid in active.ids.tolist():
@@ -365,7 +367,7 @@ class TrackEstimator:
         out[ok] = keys[best[ok]]
         return out
 
-    def _decide(self, index: int, stamp_ns: int) -> Estimate:
+    def _decide(self, index: int, stamp_ns: int, owner: NDArray[np.int64]) -> Estimate:
         """The causal estimate: the active track with the most evidence so far."""
         tc = self.config.tracking
         active = self._tracker.active()
@@ -373,6 +375,7 @@ class TrackEstimator:
         best_key, current_score = (0.0, 0), 0.0
         row = {}
         table = self._tables[index]
+        seen_now = dict(zip(owner.tolist(), table.n_points.tolist(), strict=True))
         for i, tid in enumerate(active.ids.tolist()):
             ev = self._evidence.get(tid)
             if ev is None:
@@ -382,8 +385,7 @@ class TrackEstimator:
             if tid == self._choice:
                 current_score = sc
             # ties (young tracks) go to the one seen with more points now: the surer object
-            f, c, _, _ = self._tracker.last_hit(tid)
-            key = (sc, int(table.n_points[c]) if f == index and c >= 0 else 0)
+            key = (sc, seen_now.get(tid, 0))
             if key > best_key:
                 best, best_key = tid, key
         best_score = best_key[0]
