@@ -32,6 +32,7 @@ from cldet.simulate.flight import (
     _visible,
     _Waypoint,
     drone_mover,
+    fly_waypoints,
 )
 from cldet.simulate.scene import BIRD, BUILDING, CAR, PERSON, POLE, Scene
 from cldet.simulate.terrain import VEGETATION, TerrainScene
@@ -118,38 +119,7 @@ def fly(
     above the surface below.
     """
     times = _time_grid(duration_s)
-    n = len(times)
-    pos = np.empty((n, 3))
-    p = start.astype(np.float64).copy()
-    first = waypoints[0]
-    heading = first.position - p
-    dist0 = float(np.linalg.norm(heading))
-    v = heading / dist0 * first.speed * 0.9 if dist0 > 1e-6 else np.zeros(3)
-    tau = 0.5  # velocity response time, seconds
-    k = 0
-    held = 0.0
-    for i in range(n):
-        pos[i] = p
-        if k < len(waypoints):
-            w = waypoints[k]
-            to = w.position - p
-            dist = float(np.linalg.norm(to))
-            if dist < 0.25:
-                held += _DT_S
-                v_cmd = np.zeros(3)
-                if held >= w.hold_s:
-                    k += 1
-                    held = 0.0
-            else:
-                v_cmd = to / dist * min(w.speed, 0.8 * np.sqrt(2 * a_max * dist))
-        else:
-            v_cmd = np.zeros(3)
-        acc = (v_cmd - v) / tau
-        norm = float(np.linalg.norm(acc))
-        if norm > a_max:
-            acc *= a_max / norm
-        v = v + acc * _DT_S
-        p = p + v * _DT_S
+    pos = fly_waypoints(start, waypoints, len(times), a_max, tau_s=0.5, start_speed=0.9)
     return _finish(rng, times, pos, scene)
 
 

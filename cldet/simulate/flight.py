@@ -95,24 +95,26 @@ def _time_grid(duration_s: float) -> F64:
     return np.asarray(np.arange(n) * _DT_S - _MARGIN_S, dtype=np.float64)
 
 
-def _follow(
-    rng: np.random.Generator,
+def fly_waypoints(
     start: F64,
     waypoints: list[_Waypoint],
-    duration_s: float,
-    floor: Scene,
-) -> Track:
-    """Fly the waypoints with bounded acceleration; sample every 10 ms from -1 s to duration+1 s."""
-    times = _time_grid(duration_s)
-    n = len(times)
+    n: int,
+    a_max: float,
+    tau_s: float,
+    start_speed: float,
+) -> F64:
+    """(n, 3) positions every 10 ms flying the waypoints from ``start``.
+
+    The velocity follows the command (towards the next waypoint at its speed, slowing to stop on
+    it, holding ``hold_s`` there) with response time ``tau_s`` and acceleration at most
+    ``a_max`` (m/s^2); it starts at ``start_speed`` times the first waypoint's speed.
+    """
     pos = np.empty((n, 3))
     p = start.astype(np.float64).copy()
     first = waypoints[0]
     heading = first.position - p
     dist0 = float(np.linalg.norm(heading))
-    v = heading / dist0 * first.speed * 0.8 if dist0 > 1e-6 else np.zeros(3)
-    a_max = float(rng.uniform(1.5, 3.0))
-    tau = 0.6  # velocity response time, seconds
+    v = heading / dist0 * first.speed * start_speed if dist0 > 1e-6 else np.zeros(3)
     k = 0
     held = 0.0
     for i in range(n):
@@ -131,12 +133,26 @@ def _follow(
                 v_cmd = to / dist * min(w.speed, 0.8 * np.sqrt(2 * a_max * dist))
         else:
             v_cmd = np.zeros(3)
-        acc = (v_cmd - v) / tau
+        acc = (v_cmd - v) / tau_s
         norm = float(np.linalg.norm(acc))
         if norm > a_max:
             acc *= a_max / norm
         v = v + acc * _DT_S
         p = p + v * _DT_S
+    return pos
+
+
+def _follow(
+    rng: np.random.Generator,
+    start: F64,
+    waypoints: list[_Waypoint],
+    duration_s: float,
+    floor: Scene,
+) -> Track:
+    """Fly the waypoints with bounded acceleration; sample every 10 ms from -1 s to duration+1 s."""
+    times = _time_grid(duration_s)
+    a_max = float(rng.uniform(1.5, 3.0))
+    pos = fly_waypoints(start, waypoints, len(times), a_max, tau_s=0.6, start_speed=0.8)
     # hover wobble: a few cm, slow
     amp = rng.uniform(0.01, 0.04, 3)
     freq = rng.uniform(0.2, 0.8, 3)
