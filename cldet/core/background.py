@@ -389,10 +389,6 @@ class BackgroundModel:
         if len(last) and (self.n_bins % _GROUND_EVERY_BINS == 1 or not self.ground.fitted):
             self.ground.fit(last[self.classify(last) == CORE])
 
-    def static_range(self) -> NDArray[np.float32]:
-        """(n_el, n_az) the current undilated static range per direction cell, metres."""
-        return self._static.reshape(self._n_el, self._n_az)
-
     def classify(self, points: NDArray[np.floating]) -> NDArray[np.uint8]:
         """Label each point (N,3) FOREGROUND (0), MARGIN (1) or CORE (2) background.
 

@@ -55,15 +55,9 @@ from cldet.core.background import FOREGROUND, MARGIN, BackgroundModel
 from cldet.core.bias import apply_bias
 from cldet.core.clustering import cluster_points, summarize_clusters
 from cldet.core.frames import valid_points
-from cldet.core.selection import (
-    ScoredTrack,
-    cross_section,
-    detection_weights,
-    score_tracks,
-    select_chain,
-)
+from cldet.core.selection import ScoredTrack, detection_weights, score_tracks, select_chain
 from cldet.core.smoothing import extrapolate, rts_smooth
-from cldet.core.tracking import ActiveTracks, CandidateTracker, ClusterTable
+from cldet.core.tracking import ActiveTracks, CandidateTracker, ClusterTable, cross_section
 from cldet.errors import FrameOrderError
 from cldet.types import Cluster, Estimate, LidarFrame, Source
 
@@ -394,7 +388,7 @@ class TrackEstimator:
         if best is None or best_score <= _CAUSAL_MIN_SCORE:
             best = self._choice if self._choice in row else None
         if best is not None and best == self._choice:
-            best = self._hand_over(best, row, active, index)
+            best = self._hand_over(best, row, active, index, seen_now)
         self._choice = best
         if best is None:
             return self._hold(stamp_ns)
@@ -414,21 +408,29 @@ class TrackEstimator:
             float(np.sqrt(max(active.pos_var[i], 0.0))),
         )
 
-    def _hand_over(self, chosen: int, row: dict[int, int], active: ActiveTracks, index: int) -> int:
+    def _hand_over(
+        self,
+        chosen: int,
+        row: dict[int, int],
+        active: ActiveTracks,
+        index: int,
+        seen_now: dict[int, int],
+    ) -> int:
         """The followed track, or the track that took its object this frame.
 
         When the followed track got nothing this frame but another track got a cluster within
         the hard gate of it, that track has taken over the object (two tracks on one object:
-        the younger won the assignment); the choice moves to it.
+        the younger won the assignment); the choice moves to it. ``seen_now``: the tracks that
+        got a cluster this frame.
         """
         if self._tracker.last_hit(chosen)[0] == index:
             return chosen
         here = active.position[row[chosen]]
         gate2 = self.config.tracking.max_gate_m**2
         best, best_d2 = chosen, gate2
-        for tid, i in row.items():
-            f, c, _, _ = self._tracker.last_hit(tid)
-            if tid == chosen or f != index or c < 0:
+        for tid in seen_now:
+            i = row.get(tid)
+            if i is None or tid == chosen:
                 continue
             d2 = float(np.sum((active.position[i] - here) ** 2))
             if d2 <= best_d2:

@@ -49,11 +49,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cldet.config import TrackingConfig
-from cldet.core.tracking import ClusterTable, TrackRecord
+from cldet.core.tracking import ClusterTable, TrackRecord, cross_section
 
 __all__ = [
     "ScoredTrack",
-    "cross_section",
     "detection_weights",
     "score_tracks",
     "select_chain",
@@ -83,22 +82,6 @@ def _net_motion(t: NDArray[np.float64], pos: NDArray[np.float64]) -> float:
     tc = t - t.mean()
     velocity = (tc @ (pos - pos.mean(axis=0))) / float(tc @ tc)
     return float(np.linalg.norm(velocity)) * span
-
-
-def cross_section(
-    n_mid360: NDArray[np.integer],
-    n_avia: NDArray[np.integer],
-    positions: NDArray[np.float64],
-    cfg: TrackingConfig,
-) -> NDArray[np.float64]:
-    """(H,) the area (m^2) that returned these points at this range: points / density * r^2.
-
-    A LiDAR puts a fixed number of points per steradian on a surface in each scan
-    (``mid360_points_per_sr``, ``avia_points_per_sr``), so an object of projected area A at
-    range r returns about density * A / r^2 points.
-    """
-    r2 = np.einsum("ij,ij->i", positions, positions)
-    return (n_mid360 / cfg.mid360_points_per_sr + n_avia / cfg.avia_points_per_sr) * r2
 
 
 def detection_weights(

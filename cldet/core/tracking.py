@@ -35,7 +35,13 @@ from scipy.spatial import cKDTree
 from cldet.config import TrackingConfig
 from cldet.types import Cluster
 
-__all__ = ["ActiveTracks", "CandidateTracker", "ClusterTable", "TrackRecord"]
+__all__ = [
+    "ActiveTracks",
+    "CandidateTracker",
+    "ClusterTable",
+    "TrackRecord",
+    "cross_section",
+]
 
 
 @dataclass(frozen=True)
@@ -92,6 +98,22 @@ class TrackRecord:
         return self.clusters < 0
 
 
+def cross_section(
+    n_mid360: NDArray[np.integer],
+    n_avia: NDArray[np.integer],
+    positions: NDArray[np.float64],
+    cfg: TrackingConfig,
+) -> NDArray[np.float64]:
+    """(H,) the area (m^2) that returned these points at this range: points / density * r^2.
+
+    A LiDAR puts a fixed number of points per steradian on a surface in each scan
+    (``mid360_points_per_sr``, ``avia_points_per_sr``), so an object of projected area A at
+    range r returns about density * A / r^2 points.
+    """
+    r2 = np.einsum("ij,ij->i", positions, positions)
+    return (n_mid360 / cfg.mid360_points_per_sr + n_avia / cfg.avia_points_per_sr) * r2
+
+
 @dataclass(frozen=True)
 class ActiveTracks:
     """The active candidate tracks' Kalman states (per axis: position, velocity)."""
@@ -100,7 +122,6 @@ class ActiveTracks:
     position: NDArray[np.float64]  # (T,3) metres, at the last step's time
     velocity: NDArray[np.float64]  # (T,3) m/s
     pos_var: NDArray[np.float64]  # (T,) per-axis position variance, m^2
-    last_t_s: NDArray[np.float64]  # (T,) time of each track's last detection, s
 
 
 @dataclass
@@ -322,10 +343,16 @@ class CandidateTracker:
         points: speckle tracks are not worth the search)."""
         cfg = self.cfg
         hits = self._hits[track_id]
-        last = hits.positions[-1]
         ok = hits.may_use_raw(cfg.raw_min_cluster_hits, cfg.raw_min_spread_m, cfg.max_size_m)
-        ok = ok and hits.n_points[-1] / cfg.mid360_points_per_sr * float(last @ last) >= (
-            cfg.min_cross_section_m2
+        ok = (
+            ok
+            and cross_section(
+                np.array([hits.n_points[-1]]),
+                np.zeros(1, dtype=np.int64),
+                hits.positions[-1][None, :],
+                cfg,
+            )[0]
+            >= cfg.min_cross_section_m2
         )
         if ok:
             self._raw_ok.add(track_id)
@@ -339,7 +366,6 @@ class CandidateTracker:
             position=self._x[:, :, 0].copy(),
             velocity=self._x[:, :, 1].copy(),
             pos_var=self._P[:, 0, 0].copy(),
-            last_t_s=self._last_t.copy(),
         )
 
     def is_confirmed_mover(self, track_id: int) -> bool:
