@@ -206,6 +206,39 @@ class TrackingConfig(BaseModel):
     raw_weight: float = Field(
         default=0.5, ge=0, le=1, description="score weight of a raw-gate detection"
     )
+    line_search: bool = Field(
+        default=True,
+        description="track-before-detect for sparse fast movers: constant-velocity lines through"
+        " the whole sequence's clusters become candidate tracks (cldet.core.lines)",
+    )
+    line_tol_m: float = Field(
+        default=0.7, gt=0, description="a cluster this close to a line's position is on it"
+    )
+    line_min_hits: int = Field(
+        default=5, ge=3, description="frames with a cluster on a line before it is a candidate"
+    )
+    line_seed_s: float = Field(
+        default=1.0, gt=0, description="a line starts from two clusters at most this far apart"
+    )
+    line_window_s: float = Field(
+        default=3.0, gt=0, description="longest unseen stretch a line bridges while it grows"
+    )
+    line_isolation_m: float = Field(
+        default=3.0,
+        gt=0,
+        description="a line's clusters have no other cluster of their frame this close",
+    )
+    line_min_sweep_deg: float = Field(
+        default=10.0,
+        ge=0,
+        description="a line's clusters span at least this angle seen from the sensor (a line"
+        " along the line of sight matches noise along one beam)",
+    )
+    line_min_speed: float = Field(
+        default=3.0,
+        ge=0,
+        description="lines slower than this are left to the Kalman tracker (m/s)",
+    )
     fallback_position: tuple[float, float, float] = Field(
         default=(0.734, -9.739, 33.353), description="used only when no track exists at all"
     )
@@ -220,9 +253,10 @@ class SmoothingConfig(BaseModel):
         default=2.0, gt=0, description="white-acceleration PSD of the smoother"
     )
     extrapolation_tau_s: float = Field(
-        default=1.5,
+        default=4.0,
         gt=0,
-        description="beyond the detections the velocity decays with this time constant",
+        description="beyond the detections the velocity decays with this time constant (a"
+        " drone cruising at 15 m/s takes seconds to turn or stop, not a fraction of one)",
     )
 
 

@@ -55,6 +55,7 @@ from cldet.core.background import FOREGROUND, MARGIN, BackgroundModel
 from cldet.core.bias import apply_bias
 from cldet.core.clustering import cluster_points, summarize_clusters
 from cldet.core.frames import valid_points
+from cldet.core.lines import find_lines
 from cldet.core.selection import ScoredTrack, detection_weights, score_tracks, select_chain
 from cldet.core.smoothing import extrapolate, rts_smooth
 from cldet.core.tracking import ActiveTracks, CandidateTracker, ClusterTable, cross_section
@@ -458,7 +459,10 @@ class TrackEstimator:
         stamps = np.asarray(self._stamps, dtype=np.int64)
         t_s = self._times[:n].copy()  # observation times (stamp + scan offset)
         tc = cfg.tracking
-        scored = score_tracks(self._tracker.records(), self._tables, t_s, tc)
+        records = self._tracker.records()
+        first_id = records[-1].track_id + 1 if records else 0
+        records += find_lines(self._tables, t_s, tc, first_id, self._offset_s)
+        scored = score_tracks(records, self._tables, t_s, tc)
         chain = select_chain(scored, tc)
         if not chain:
             pos = np.asarray(tc.fallback_position, dtype=np.float64)

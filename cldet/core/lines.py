@@ -1,0 +1,330 @@
+"""Track-before-detect for sparse fast movers: constant-velocity lines through space-time.
+
+A drone passing at 10-23 m/s, 20-90 m out, returns one or two points in one scan out of three
+or five. The Kalman tracker (``cldet.core.tracking``) cannot follow it: between two sightings
+it moved further than any gate that keeps clutter out, so every sighting starts a new track of
+one detection, and no single frame says "drone". Over a few seconds, though, the sightings lie
+on one straight line in space-time, and nothing else does: rain and dust returns are
+independent from scan to scan, static clutter does not move, a walking person is slow.
+
+The search, over the clusters of the whole sequence (offline, inside ``refine``):
+
+1. candidates: drone-sized clusters (``max_size_m``) whose points are not a lone return from
+   something far smaller than a drone (``min_cross_section_m2``, see
+   ``cldet.core.tracking.cross_section``: near-sensor rain and dust drop out here), and
+   isolated: no other cluster of the same frame within ``line_isolation_m``. A drone in flight
+   is a small object in free air; where returns crowd (rain close to the sensor, a bush's
+   fringe, a crowd) any line through them would collect inliers by chance, and the Kalman
+   tracker, not the line search, follows what moves there;
+2. seeds: every pair of candidates at most ``line_seed_s`` apart whose implied speed lies
+   between ``line_min_speed`` (slower movers are the Kalman tracker's) and ``max_speed``;
+3. each seed's line is scored by the frames within ``line_seed_s`` of it that have a
+   candidate within ``line_tol_m`` of the line (one per frame);
+4. a line must sweep at least ``line_min_sweep_deg`` as seen from the sensor: lone returns
+   along one beam at varying ranges (rain, dust, multipath) line up with any line that runs
+   along the line of sight, so such a line is no evidence of a mover (a drone flying straight
+   at the sensor is left to the Kalman tracker: its returns grow as it comes);
+5. greedily, best seed first: its inliers are refitted (least squares, constant velocity) and
+   the line is grown at both ends, each end predicted from the fit of its own nearest inliers
+   (a pass that curves gently is followed piece by piece), until no frame within
+   ``line_window_s`` of an end adds an inlier (a long straight pass bridges its unseen
+   stretches); a line with at least ``line_min_hits`` inliers
+   becomes a candidate track and its detections are taken (no other line may use them).
+
+The lines are candidate tracks like the tracker's: ``cldet.core.selection`` scores them with
+the same per-detection evidence and chains them with the others; the best whole-sequence
+explanation wins. A line's detections count with an NIS of at most the 95 % point (they lie
+within the tolerance by construction).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from cldet.config import TrackingConfig
+from cldet.core.tracking import ClusterTable, TrackRecord, cross_section
+
+__all__ = ["find_lines"]
+
+_NIS95 = 7.81  # 95 % point of chi^2, 3 dof: a detection at the tolerance
+_END_FIT = 8  # inliers nearest an end that predict the line beyond it
+_MAX_SEEDS = 200_000
+_TIME_SCALE_M_PER_S = 1e4  # space-time lookups: 0.01 s apart is 100 m apart  # a frame crowded with candidates: keep the closest pairs only
+
+
+def _fit(t: NDArray[np.float64], p: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+    """Least-squares constant velocity: (position at mean time, velocity, mean time)."""
+    tm = float(t.mean())
+    tc = t - tm
+    den = float(tc @ tc)
+    v = (tc @ (p - p.mean(axis=0))) / den if den > 0 else np.zeros(3)
+    return p.mean(axis=0), v, np.array(tm)
+
+
+class _Pool:
+    """The candidate detections of the whole sequence, indexed per frame."""
+
+    def __init__(
+        self, tables: list[ClusterTable], times_s: NDArray[np.float64], cfg: TrackingConfig
+    ) -> None:
+        frames, clusters = [], []
+        for f, table in enumerate(tables):
+            if not len(table):
+                continue
+            cross = cross_section(table.n_mid360, table.n_avia, table.centroid, cfg)
+            ok = (table.extent <= cfg.max_size_m) & (cross >= cfg.min_cross_section_m2)
+            if len(table) > 1:
+                # isolated: no other cluster of the frame within line_isolation_m
+                near = cKDTree(table.centroid).query_ball_point(
+                    table.centroid, cfg.line_isolation_m, return_length=True
+                )
+                ok &= np.asarray(near) <= 1
+            keep = np.flatnonzero(ok)
+            frames.append(np.full(len(keep), f, dtype=np.int64))
+            clusters.append(keep.astype(np.int64))
+        self.frame = np.concatenate(frames) if frames else np.zeros(0, dtype=np.int64)
+        self.cluster = np.concatenate(clusters) if clusters else np.zeros(0, dtype=np.int64)
+        self.pos = (
+            np.array([tables[f].centroid[c] for f, c in zip(self.frame, self.cluster, strict=True)])
+            if len(self.frame)
+            else np.zeros((0, 3))
+        )
+        self.t = times_s[self.frame]
+        self.times = times_s
+        n = len(tables)
+        self.start = np.searchsorted(self.frame, np.arange(n + 1))  # candidates of frame f
+        self.trees: dict[int, cKDTree] = {
+            f: cKDTree(self.pos[self.start[f] : self.start[f + 1]])
+            for f in range(n)
+            if self.start[f + 1] > self.start[f]
+        }
+        # one space-time tree for lookups in many frames at once: time scaled so far apart that
+        # no tolerance reaches from one frame into another
+        self._scale = _TIME_SCALE_M_PER_S
+        self._st = cKDTree(np.column_stack([self.pos, self.t * self._scale]))
+        self.used = np.zeros(len(self.frame), dtype=bool)
+
+    def nearest(
+        self, frames: NDArray[np.int64], points: NDArray[np.float64], tol: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Per (frame, point): the distance to that frame's nearest unused candidate within tol
+        (inf: none), and that candidate's index in the pool (-1: none)."""
+        m = len(points)
+        if m == 0 or len(self.frame) == 0:
+            return np.full(m, np.inf), np.full(m, -1, dtype=np.int64)
+        k = min(3, len(self.frame))
+        query = np.column_stack([points, self.times[frames] * self._scale])
+        d, j = self._st.query(query, k=k, distance_upper_bound=tol)
+        d, j = d.reshape(m, k), j.reshape(m, k)
+        idx = np.where(j < len(self.frame), j, -1)
+        d = np.where((idx >= 0) & ~self.used[np.maximum(idx, 0)], d, np.inf)
+        best = np.argmin(d, axis=1)
+        rows = np.arange(m)
+        dist = d[rows, best]
+        return dist, np.where(np.isfinite(dist), idx[rows, best], -1)
+
+
+def _seeds(pool: _Pool, times_s: NDArray[np.float64], cfg: TrackingConfig) -> NDArray[np.int64]:
+    """(S,2) candidate pairs (earlier, later) whose implied speed a drone could fly."""
+    pairs = []
+    frames = sorted(pool.trees)
+    for i, a in enumerate(frames):
+        for b in frames[i + 1 :]:
+            dt = float(times_s[b] - times_s[a])
+            if dt > min(cfg.line_seed_s, cfg.line_window_s):
+                break
+            hits = pool.trees[a].query_ball_tree(pool.trees[b], cfg.max_speed * dt)
+            ia = np.repeat(np.arange(len(hits)), [len(h) for h in hits])
+            if not len(ia):
+                continue
+            ib = np.concatenate([np.asarray(h, dtype=np.int64) for h in hits])
+            ia, ib = ia + pool.start[a], ib + pool.start[b]
+            dist = np.linalg.norm(pool.pos[ib] - pool.pos[ia], axis=1)
+            keep = dist >= cfg.line_min_speed * dt
+            pairs.append(np.stack([ia[keep], ib[keep]], axis=1))
+    if not pairs:
+        return np.zeros((0, 2), dtype=np.int64)
+    out = np.concatenate(pairs)
+    if len(out) > _MAX_SEEDS:
+        gap = pool.t[out[:, 1]] - pool.t[out[:, 0]]
+        out = out[np.argsort(gap, kind="stable")[:_MAX_SEEDS]]
+    return out
+
+
+def _count(
+    pool: _Pool,
+    seeds: NDArray[np.int64],
+    times_s: NDArray[np.float64],
+    cfg: TrackingConfig,
+    half_scan_s: float,
+) -> NDArray[np.int64]:
+    """Per seed: distinct places along its line (within the window around it) where a frame
+    has a candidate on the line."""
+    a, b = seeds[:, 0], seeds[:, 1]
+    ta, tb = pool.t[a], pool.t[b]
+    v = (pool.pos[b] - pool.pos[a]) / (tb - ta)[:, None]
+    speed = np.linalg.norm(v, axis=1)
+    tol = cfg.line_tol_m + speed * half_scan_s
+    place = 2.0 * tol  # along-line length of one place
+    found_seed: list[NDArray[np.int64]] = []
+    found_place: list[NDArray[np.int64]] = []
+    w = cfg.line_seed_s  # a seed pair predicts well only near itself
+    by_start = np.argsort(ta, kind="stable")
+    ta_sorted = ta[by_start]
+    for f in pool.trees:
+        tf = float(times_s[f])
+        # tb <= ta + seed_s, so a seed whose window holds tf starts within
+        # [tf - w - seed_s, tf + w]
+        lo, hi = np.searchsorted(ta_sorted, [tf - w - cfg.line_seed_s, tf + w], side="left")
+        near = by_start[lo:hi]
+        sel = near[(tf >= ta[near] - w) & (tf <= tb[near] + w)]
+        if not len(sel):
+            continue
+        dt = tf - ta[sel]
+        pred = pool.pos[a[sel]] + v[sel] * dt[:, None]
+        d, _ = pool.nearest(np.full(len(sel), f), pred, float(tol[sel].max()))
+        on = d <= tol[sel]
+        found_seed.append(sel[on])
+        found_place.append(np.floor(dt[on] * speed[sel[on]] / place[sel[on]]).astype(np.int64))
+    if not found_seed:
+        return np.zeros(len(seeds), dtype=np.int64)
+    seed_ids, places = np.concatenate(found_seed), np.concatenate(found_place)
+    # distinct places per seed: a static clump on the line counts once
+    key = np.unique(np.stack([seed_ids, places], axis=1), axis=0)
+    return np.bincount(key[:, 0], minlength=len(seeds))
+
+
+def _tolerance(v: NDArray[np.float64], cfg: TrackingConfig, half_scan_s: float) -> float:
+    """How far a cluster on the line may lie from its position at the frame's time: the
+    centroid's noise plus the drone's travel over half a scan (a scan's points are taken over
+    its whole duration)."""
+    return cfg.line_tol_m + float(np.linalg.norm(v)) * half_scan_s
+
+
+def _grow(
+    pool: _Pool,
+    seed: NDArray[np.int64],
+    times_s: NDArray[np.float64],
+    cfg: TrackingConfig,
+    half_scan_s: float,
+) -> NDArray[np.int64]:
+    """The inliers (pool indices, in time order) of the line grown from a seed pair."""
+    members: dict[int, int] = {int(pool.frame[i]): int(i) for i in seed}
+    while True:
+        idx = np.array(sorted(members.values(), key=lambda i: pool.frame[i]))
+        t0, t1 = times_s[pool.frame[idx[0]]], times_s[pool.frame[idx[-1]]]
+        window = np.flatnonzero(
+            (times_s >= t0 - cfg.line_window_s) & (times_s <= t1 + cfg.line_window_s)
+        )
+        fits = (
+            _fit(pool.t[idx[:_END_FIT]], pool.pos[idx[:_END_FIT]]),  # before the first inlier
+            _fit(pool.t[idx], pool.pos[idx]),  # between
+            _fit(pool.t[idx[-_END_FIT:]], pool.pos[idx[-_END_FIT:]]),  # after the last
+        )
+        todo = np.array(
+            [f for f in window.tolist() if f not in members and f in pool.trees], dtype=np.int64
+        )
+        if not len(todo):
+            return idx
+        tf = times_s[todo]
+        part = np.where(tf < t0, 0, np.where(tf > t1, 2, 1))
+        pred = np.empty((len(todo), 3))
+        tol = np.empty(len(todo))
+        for k, (p0, v, tm) in enumerate(fits):
+            on = part == k
+            pred[on] = p0 + np.outer(tf[on] - float(tm), v)
+            tol[on] = _tolerance(v, cfg, half_scan_s)
+        d, j = pool.nearest(todo, pred, float(tol.max()))
+        hit = d <= tol
+        for f, i in zip(todo[hit].tolist(), j[hit].tolist(), strict=True):
+            members[f] = i
+        added = bool(hit.any())
+        if not added:
+            return idx
+
+
+def _sweep_deg(p: NDArray[np.float64]) -> float:
+    """The angle the points span as seen from the sensor, degrees (first to farthest)."""
+    u = p / np.maximum(np.linalg.norm(p, axis=1), 1e-9)[:, None]
+    return float(np.degrees(np.arccos(np.clip(np.min(u @ u[0]), -1.0, 1.0))))
+
+
+def _places(p: NDArray[np.float64], v: NDArray[np.float64], size: float) -> int:
+    """Distinct places of ``size`` metres along direction ``v`` that the points ``p`` occupy."""
+    speed = float(np.linalg.norm(v))
+    if speed == 0.0:
+        return 1
+    along = (p - p[0]) @ (v / speed)
+    return len(np.unique(np.floor(along / size)))
+
+
+def find_lines(
+    tables: list[ClusterTable],
+    times_s: NDArray[np.float64],
+    cfg: TrackingConfig,
+    first_id: int,
+    half_scan_s: float = 0.05,
+) -> list[TrackRecord]:
+    """Candidate tracks of sparse fast movers (see the module docstring).
+
+    Args:
+        tables: every frame's clusters.
+        times_s: (N,) each frame's observation time, seconds.
+        cfg: the tracking configuration (``line_*``, ``max_speed``, ``max_size_m``,
+            ``min_cross_section_m2``).
+        first_id: the track id of the first line (after the tracker's ids).
+        half_scan_s: half a scan's duration: a scan's points are taken up to this long before
+            or after the frame's observation time, so a line's tolerance grows by its speed
+            times this.
+
+    Returns:
+        One TrackRecord per line found, ids from ``first_id`` on.
+    """
+    if not cfg.line_search or len(tables) < cfg.line_min_hits:
+        return []
+    pool = _Pool(tables, times_s, cfg)
+    seeds = _seeds(pool, times_s, cfg)
+    if not len(seeds):
+        return []
+    counts = _count(pool, seeds, times_s, cfg, half_scan_s)
+    order = np.argsort(-counts, kind="stable")
+    order = order[counts[order] >= 3]  # the pair and one more place: worth growing
+    lines: list[TrackRecord] = []
+    tried = np.zeros(len(pool.frame), dtype=bool)  # inliers of a line already grown
+    for s in order:
+        if pool.used[seeds[s]].any() or tried[seeds[s]].all():
+            continue  # taken, or it would grow into a line already grown
+        idx = _grow(pool, seeds[s], times_s, cfg, half_scan_s)
+        tried[idx] = True
+        t, p = pool.t[idx], pool.pos[idx]
+        p0, v, tm = _fit(t, p)
+        speed = float(np.linalg.norm(v))
+        tol = _tolerance(v, cfg, half_scan_s)
+        if (
+            speed < cfg.line_min_speed
+            or speed > cfg.max_speed
+            or _places(p, v, 2.0 * tol) < cfg.line_min_hits
+            or _sweep_deg(p) < cfg.line_min_sweep_deg
+        ):
+            continue
+        pool.used[idx] = True
+        res = p - (p0 + np.outer(t - float(tm), v))
+        nis = _NIS95 * np.minimum(np.einsum("ij,ij->i", res, res) / tol**2, 1.0)
+        frames, clusters = pool.frame[idx], pool.cluster[idx]
+        lines.append(
+            TrackRecord(
+                track_id=first_id + len(lines),
+                frames=frames,
+                clusters=clusters,
+                positions=p,
+                n_points=np.array(
+                    [tables[f].n_points[c] for f, c in zip(frames, clusters, strict=True)],
+                    dtype=np.int64,
+                ),
+                nis=nis,
+                speed=np.full(len(idx), speed),
+            )
+        )
+    return lines
