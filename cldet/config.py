@@ -147,6 +147,16 @@ class TrackingConfig(BaseModel):
         description="score factor of a track that goes nowhere (static clutter, or a drone"
         " hovering all along: a real mover wins)",
     )
+    fixed_spread_m: float = Field(
+        default=0.025,
+        ge=0,
+        description="a track whose half-second mean position stays (90 %) this close to its"
+        " median for a second or more is rigidly fixed structure: a hovering drone wanders"
+        " more (0: off)",
+    )
+    fixed_factor: float = Field(
+        default=0.1, gt=0, le=1, description="score factor of a rigidly fixed track"
+    )
     static_spread_m: float = Field(
         default=0.5,
         ge=0,
@@ -205,6 +215,13 @@ class TrackingConfig(BaseModel):
     )
     raw_weight: float = Field(
         default=0.5, ge=0, le=1, description="score weight of a raw-gate detection"
+    )
+    causal_confirm: float = Field(
+        default=3.0,
+        ge=0,
+        description="causal: a track is reported as the drone once its running evidence (summed"
+        " detection weights after its first) reaches this; before any track has, the estimate"
+        " is FALLBACK (0: the first track with a second detection)",
     )
     line_search: bool = Field(
         default=True,

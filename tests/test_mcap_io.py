@@ -419,7 +419,10 @@ def test_atomic_output_replaces_only_when_complete(tmp_path: Path) -> None:
     with atomic_output(target) as stream:
         stream.write(b"first")
     assert target.read_bytes() == b"first"
-    with pytest.raises(OutputExistsError, match=r"seq0001\.mcap already exists"), atomic_output(target):
+    with (
+        pytest.raises(OutputExistsError, match=r"seq0001\.mcap already exists"),
+        atomic_output(target),
+    ):
         pass
     for exc in (RuntimeError("disk on fire"), KeyboardInterrupt()):
         with pytest.raises(type(exc)), atomic_output(target, overwrite=True) as stream:

@@ -24,11 +24,13 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    (``background.protect_tracks``), so a drone that stops to hover is not learned;
 5. the causal choice: the active track with the highest running evidence (the per-detection
    weights of ``cldet.core.selection``, times its static and speed factors so far; a challenger
-   must beat the current choice by ``_SWITCH_RATIO``); the estimate is that track's filtered
-   state moved back from the points' time to the stamp.
+   must beat the current choice by ``_SWITCH_RATIO``; no track is reported before one has
+   gathered ``tracking.causal_confirm``); the estimate is that track's filtered state moved
+   back from the points' time to the stamp.
 
-``refine``: the drone's chain of tracks chosen by whole-sequence evidence
-(``cldet.core.selection``); a forward-backward RTS smoother (``cldet.core.smoothing``) fills
+``refine``: the candidate tracks plus the constant-velocity lines of sparse fast movers
+(``cldet.core.lines``, track-before-detect); the drone's chain of tracks chosen by
+whole-sequence evidence (``cldet.core.selection``); a forward-backward RTS smoother (``cldet.core.smoothing``) fills
 the gaps; before the first and after the last detection the track's own motion is
 extrapolated, its velocity decaying with time constant ``extrapolation_tau_s``; the centroid
 bias correction (``cldet.core.bias``) is applied last. Only when no candidate track exists at
@@ -42,6 +44,7 @@ FALLBACK (no track at all). ``sigma_m`` is the per-axis 1-sigma position uncerta
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from typing import Protocol
@@ -50,13 +53,20 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from cldet.config import CldetConfig
+from cldet.config import CldetConfig, TrackingConfig
 from cldet.core.background import FOREGROUND, MARGIN, BackgroundModel
 from cldet.core.bias import apply_bias
 from cldet.core.clustering import cluster_points, summarize_clusters
 from cldet.core.frames import valid_points
 from cldet.core.lines import find_lines
-from cldet.core.selection import ScoredTrack, detection_weights, score_tracks, select_chain
+from cldet.core.selection import (
+    FIXED_JUDGE_S,
+    FIXED_MEAN_HITS,
+    ScoredTrack,
+    detection_weights,
+    score_tracks,
+    select_chain,
+)
 from cldet.core.smoothing import extrapolate, rts_smooth
 from cldet.core.tracking import ActiveTracks, CandidateTracker, ClusterTable, cross_section
 from cldet.errors import FrameOrderError
@@ -77,7 +87,6 @@ NS_PER_S = 1_000_000_000
 _LOST_AFTER_S = 0.5  # a gap without detection longer than this is reported as lost/reacquired
 _SWITCH_RATIO = 1.3  # causal choice: a challenger must have this much more evidence
 _JUDGE_STATIC_S = 1.0  # causal: a track must live this long before it is judged static
-_CAUSAL_MIN_SCORE = 0.0  # any track with a second detection beats holding or the fallback
 
 
 @dataclass(frozen=True)
@@ -144,6 +153,12 @@ class _Evidence:
     lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
     upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
     moved: float = 0.0  # largest edge of the box around its detections, metres
+    recent: deque[NDArray[np.float64]] = field(
+        default_factory=lambda: deque(maxlen=FIXED_MEAN_HITS)
+    )
+    mean_lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
+    mean_upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
+    means: int = 0  # running means of FIXED_MEAN_HITS detections taken into the box
 
     def add(self, t_s: float, weight: float, position: NDArray[np.float64], both: bool) -> None:
         if self.hits:
@@ -156,12 +171,26 @@ class _Evidence:
         np.minimum(self.lower, position, out=self.lower)
         np.maximum(self.upper, position, out=self.upper)
         self.moved = float(np.max(self.upper - self.lower))
+        self.recent.append(position)
+        if len(self.recent) == FIXED_MEAN_HITS:
+            mean = np.mean(self.recent, axis=0)
+            np.minimum(self.mean_lower, mean, out=self.mean_lower)
+            np.maximum(self.mean_upper, mean, out=self.mean_upper)
+            self.means += 1
 
-    def score(self, static_spread_m: float, static_factor: float) -> float:
-        """Running evidence; "static" is judged once the track has lived ``_JUDGE_STATIC_S``."""
+    def score(self, cfg: TrackingConfig) -> float:
+        """Running evidence; "static" and "fixed" (see ``cldet.core.selection``: here the box
+        around the running means, whose edge is about twice the spread) are judged once the
+        track has lived ``_JUDGE_STATIC_S`` (fixed: ``FIXED_JUDGE_S``)."""
         moved = self.moved
         judged = self.last_t_s - self.first_t_s >= _JUDGE_STATIC_S
-        factor = static_factor if judged and moved < 2.0 * static_spread_m else 1.0
+        factor = 1.0
+        mean_moved = float(np.max(self.mean_upper - self.mean_lower))
+        fixed_judged = self.last_t_s - self.first_t_s >= FIXED_JUDGE_S
+        if fixed_judged and self.means > FIXED_MEAN_HITS and mean_moved < 2.0 * cfg.fixed_spread_m:
+            factor = cfg.fixed_factor
+        elif judged and moved < 2.0 * cfg.static_spread_m:
+            factor = cfg.static_factor
         return self.weight * factor * (1.0 + 0.5 * self.both / max(self.hits, 1))
 
 
@@ -376,7 +405,7 @@ class TrackEstimator:
             if ev is None:
                 continue
             row[tid] = i
-            sc = ev.score(tc.static_spread_m, tc.static_factor)
+            sc = ev.score(tc)
             if tid == self._choice:
                 current_score = sc
             # ties (young tracks) go to the one seen with more points now: the surer object
@@ -386,7 +415,7 @@ class TrackEstimator:
         best_score = best_key[0]
         if self._choice in row and current_score * _SWITCH_RATIO >= best_score:
             best = self._choice
-        if best is None or best_score <= _CAUSAL_MIN_SCORE:
+        if best is None or best_score <= 0.0 or best_score < tc.causal_confirm:
             best = self._choice if self._choice in row else None
         if best is not None and best == self._choice:
             best = self._hand_over(best, row, active, index, seen_now)

@@ -27,6 +27,13 @@ each detection weighted by per-detection evidence and the track's factors:
   than ``static_spread_m`` over the track's span (a swaying or flickering clump far away):
   static clutter, or a drone hovering the whole time (kept when nothing else is there, but a
   real mover wins). This holds at every elevation: nothing assumes an open sky;
+* fixed: factor ``fixed_factor`` (0.1) instead when, over at least 2 s, the running mean of
+  5 detections (about half a second) stays within ``fixed_spread_m`` (2.5 cm, 90 %) of its
+  median: a multirotor holding position still wanders by centimetres to decimetres (its
+  position controller, the wind), so a mean position fixed to a few centimetres is rigid
+  structure (a sign, a lamp head) that the background keeps as foreground because it floats.
+  The mean averages the sampling noise away only for objects with many points: a sparse or far
+  object never looks fixed;
 * motion consistency: a detection whose NIS exceeds 7.81 (the 95 % point of chi^2, 3 dof)
   weighs exp(-(NIS - 7.81) / 7.81): smooth motion keeps its weight, erratic speckle or a
   bird's jinks lose it;
@@ -61,6 +68,8 @@ __all__ = [
 _LINK_COST = 2.0
 _NIS95 = 7.81  # 95 % point of chi^2 with 3 degrees of freedom
 _JITTER_M = 2.0  # a track scattered less than this that goes nowhere is static clutter
+FIXED_JUDGE_S = 2.0  # a track must be seen this long before it is judged rigidly fixed
+FIXED_MEAN_HITS = 5  # "fixed" looks at the running mean of this many detections
 
 
 @dataclass(frozen=True)
@@ -82,6 +91,17 @@ def _net_motion(t: NDArray[np.float64], pos: NDArray[np.float64]) -> float:
     tc = t - t.mean()
     velocity = (tc @ (pos - pos.mean(axis=0))) / float(tc @ tc)
     return float(np.linalg.norm(velocity)) * span
+
+
+def _is_fixed(t: NDArray[np.float64], pos: NDArray[np.float64], spread_m: float) -> bool:
+    """Whether the running mean of ``FIXED_MEAN_HITS`` detections stays (90 %) within
+    ``spread_m`` of its median over at least ``FIXED_JUDGE_S``: rigid structure, not a drone."""
+    if spread_m <= 0 or len(t) < 2 * FIXED_MEAN_HITS or t[-1] - t[0] < FIXED_JUDGE_S:
+        return False
+    c = np.cumsum(np.vstack([np.zeros((1, 3)), pos]), axis=0)
+    mean = (c[FIXED_MEAN_HITS:] - c[:-FIXED_MEAN_HITS]) / FIXED_MEAN_HITS
+    dist = np.linalg.norm(mean - np.median(mean, axis=0), axis=1)
+    return float(np.percentile(dist, 90)) < spread_m
 
 
 def detection_weights(
@@ -147,7 +167,9 @@ def score_tracks(
             factor *= 0.1
         centre = np.median(pos, axis=0)
         spread = float(np.percentile(np.linalg.norm(pos - centre, axis=1), 90))
-        if spread < cfg.static_spread_m or (
+        if _is_fixed(times_s[rec.frames], pos, cfg.fixed_spread_m):
+            factor *= cfg.fixed_factor
+        elif spread < cfg.static_spread_m or (
             spread < _JITTER_M and _net_motion(times_s[rec.frames], pos) < cfg.static_spread_m
         ):
             factor *= cfg.static_factor
