@@ -156,9 +156,11 @@ class _Evidence:
     recent: deque[NDArray[np.float64]] = field(
         default_factory=lambda: deque(maxlen=FIXED_MEAN_HITS)
     )
+    recent_sum: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     mean_lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
     mean_upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
     means: int = 0  # running means of FIXED_MEAN_HITS detections taken into the box
+    mean_moved: float = 0.0  # largest edge of the box around those means, metres
 
     def add(self, t_s: float, weight: float, position: NDArray[np.float64], both: bool) -> None:
         if self.hits:
@@ -171,25 +173,30 @@ class _Evidence:
         np.minimum(self.lower, position, out=self.lower)
         np.maximum(self.upper, position, out=self.upper)
         self.moved = float(np.max(self.upper - self.lower))
-        self.recent.append(position)
         if len(self.recent) == FIXED_MEAN_HITS:
-            mean = np.mean(self.recent, axis=0)
+            self.recent_sum -= self.recent[0]
+        self.recent.append(position)
+        self.recent_sum += position
+        if len(self.recent) == FIXED_MEAN_HITS:
+            mean = self.recent_sum / FIXED_MEAN_HITS
             np.minimum(self.mean_lower, mean, out=self.mean_lower)
             np.maximum(self.mean_upper, mean, out=self.mean_upper)
+            self.mean_moved = float(np.max(self.mean_upper - self.mean_lower))
             self.means += 1
 
     def score(self, cfg: TrackingConfig) -> float:
         """Running evidence; "static" and "fixed" (see ``cldet.core.selection``: here the box
         around the running means, whose edge is about twice the spread) are judged once the
         track has lived ``_JUDGE_STATIC_S`` (fixed: ``FIXED_JUDGE_S``)."""
-        moved = self.moved
-        judged = self.last_t_s - self.first_t_s >= _JUDGE_STATIC_S
+        lived = self.last_t_s - self.first_t_s
         factor = 1.0
-        mean_moved = float(np.max(self.mean_upper - self.mean_lower))
-        fixed_judged = self.last_t_s - self.first_t_s >= FIXED_JUDGE_S
-        if fixed_judged and self.means > FIXED_MEAN_HITS and mean_moved < 2.0 * cfg.fixed_spread_m:
+        if (
+            lived >= FIXED_JUDGE_S
+            and self.means > FIXED_MEAN_HITS
+            and self.mean_moved < 2.0 * cfg.fixed_spread_m
+        ):
             factor = cfg.fixed_factor
-        elif judged and moved < 2.0 * cfg.static_spread_m:
+        elif lived >= _JUDGE_STATIC_S and self.moved < 2.0 * cfg.static_spread_m:
             factor = cfg.static_factor
         return self.weight * factor * (1.0 + 0.5 * self.both / max(self.hits, 1))
 
