@@ -29,12 +29,18 @@ from cldet import __version__
 from cldet.config import CldetConfig, config_to_dict
 from cldet.core.estimator import FrameDetections, SequenceEstimate, make_estimator
 from cldet.core.frames import pair_frames
-from cldet.errors import CldetError, FrameOrderError, LogError
+from cldet.errors import CldetError, FrameOrderError
 from cldet.io import topics
 from cldet.io.files import check_output, lock_file
-from cldet.io.mcap_read import iter_clouds, iter_positions, open_log
+from cldet.io.mcap_read import open_log
 from cldet.io.mcap_write import LogWriter
 from cldet.io.rewrite import Addition, rewrite_log
+from cldet.io.sources import (
+    SensorTopics,
+    iter_log_clouds,
+    iter_log_positions,
+    select_topics,
+)
 from cldet.progress import NullProgress, Progress
 from cldet.signals import init_worker, stop_workers
 from cldet.types import Cloud, Estimate, LidarFrame, Source
@@ -75,9 +81,24 @@ class AnnotateReport:
         return "; ".join(parts)
 
 
-def _frames(log: Path, has_avia: bool) -> Iterator[LidarFrame]:
-    avia: Iterator[Cloud] = iter_clouds(log, topics.LIVOX_AVIA) if has_avia else iter(())
-    return pair_frames(iter_clouds(log, topics.LIDAR_360), avia)
+def _frames(log: Path, sensors: SensorTopics) -> Iterator[LidarFrame]:
+    """The LiDAR's frames paired with the Avia's, both streamed (one pass over each topic)."""
+    lidar_frame: list[str] = []  # the LiDAR's frame id, from its first cloud
+
+    def lidar() -> Iterator[Cloud]:
+        for cloud in iter_log_clouds(log, sensors.lidar):
+            if not lidar_frame:
+                lidar_frame.append(cloud.frame_id)
+            yield Cloud(stamp_ns=cloud.stamp_ns, points=cloud.points)
+
+    def avia(topic: str) -> Iterator[Cloud]:
+        # into the LiDAR's frame through the log's /tf_static when it has one; pair_frames asks
+        # for the first LiDAR cloud before the first Avia cloud
+        into = lambda: lidar_frame[0] if lidar_frame else None  # noqa: E731
+        for cloud in iter_log_clouds(log, topic, target_frame=into):
+            yield Cloud(stamp_ns=cloud.stamp_ns, points=cloud.points)
+
+    return pair_frames(lidar(), avia(sensors.avia) if sensors.avia else iter(()))
 
 
 def annotate_log(
@@ -88,24 +109,36 @@ def annotate_log(
     rrd: Path | None = None,
     write_rrd: bool = True,
     progress: Progress | None = None,
+    lidar: str | None = None,
+    avia: str | None = None,
+    truth: str | None = None,
 ) -> AnnotateReport:
     """Estimate the drone's position at every Mid-360 frame of ``log`` and write the results back.
 
     Args:
-        log: an MCAP log written by ``cldet convert`` (needs ``/lidar_360``; uses ``/livox_avia``
-            and ``/ground_truth`` when present). Never damaged: results go to a temporary file
-            renamed over ``output`` only when complete.
+        log: an MCAP log: written by ``cldet convert`` (``/lidar_360``, with ``/livox_avia`` and
+            ``/ground_truth`` when present) or recorded with ROS (point clouds as
+            ``sensor_msgs/msg/PointCloud2`` or Livox ``CustomMsg``, see
+            :mod:`cldet.io.sources`). Never damaged: results go to a temporary file renamed over
+            ``output`` only when complete.
         config: the estimator configuration (defaults when None).
         output: where the annotated log goes; default ``log`` itself (rewritten in place).
         rrd: the Rerun review recording; default ``output`` with suffix ``.rrd``.
         write_rrd: False skips the recording.
         progress: receives one unit per frame.
+        lidar: the LiDAR's point-cloud topic (default: ``/lidar_360``, else the log's only
+            point-cloud topic).
+        avia: the Avia's point-cloud topic, fused with the LiDAR's (default: ``/livox_avia``
+            with ``/lidar_360``, else none).
+        truth: a ground-truth position topic for the reported error (default:
+            ``/ground_truth`` when present).
 
     Returns:
         An :class:`AnnotateReport`.
 
     Raises:
-        LogError: the log cannot be read or has no ``/lidar_360`` channel.
+        LogError: the log cannot be read, a topic is missing or of another type, no (or more
+            than one) topic could be the LiDAR; CorruptMessageError: a message is malformed.
         OutputError: an output cannot be written there (checked before any work).
     """
     started = time.perf_counter()
@@ -119,14 +152,8 @@ def annotate_log(
     with open_log(log) as reader:
         found = reader.list_topics()
         source_meta = reader.metadata().get(topics.METADATA_SOURCE, {})
-    if not found.get(topics.LIDAR_360):  # absent, or a channel without a message
-        what = "no message on its" if topics.LIDAR_360 in found else "no"
-        raise LogError(
-            f"{log}: {what} {topics.LIDAR_360} channel, nothing to annotate; topics in the log: "
-            + (", ".join(f"{t} ({n})" for t, n in sorted(found.items())) or "none")
-        )
-    n_frames = found[topics.LIDAR_360]
-    has_avia = found.get(topics.LIVOX_AVIA, 0) > 0
+        sensors = select_topics(reader, lidar, avia, truth)
+    n_frames = found[sensors.lidar]
     sequence = source_meta.get("sequence", log.stem)
 
     view: View = NullView()
@@ -139,7 +166,7 @@ def annotate_log(
         progress.start(n_frames, f"{sequence}: tracking")
         detections: list[FrameDetections] = []
         try:
-            for frame in _frames(log, has_avia):
+            for frame in _frames(log, sensors):
                 found_here = estimator.register_frame(frame)
                 detections.append(found_here)
                 view.log_frame(frame, found_here)
@@ -148,13 +175,11 @@ def annotate_log(
             raise FrameOrderError(f"{log}: {err}") from err
         result = estimator.refine()
         view.log_result(result, detections)
-        truth = (
-            list(iter_positions(log, topics.GROUND_TRUTH)) if found.get(topics.GROUND_TRUTH) else []
-        )
+        truths = list(iter_log_positions(log, sensors.truth)) if sensors.truth else []
         rms = None
-        if truth:
-            truth_ns = np.array([t.stamp_ns for t in truth], dtype=np.int64)
-            truth_xyz = np.array([t.position for t in truth], dtype=np.float64)
+        if truths:
+            truth_ns = np.array([t.stamp_ns for t in truths], dtype=np.int64)
+            truth_xyz = np.array([t.position for t in truths], dtype=np.float64)
             errors = _truth_errors(result.estimates, truth_ns, truth_xyz)
             view.log_truth(truth_ns, truth_xyz, errors)
             rms = None if errors is None else float(np.sqrt(np.mean(errors**2)))
@@ -165,6 +190,9 @@ def annotate_log(
                 "cldet_version": __version__,
                 "sequence": sequence,
                 "frames": str(len(detections)),
+                "lidar": sensors.lidar,
+                "avia": sensors.avia or "",
+                "truth": sensors.truth or "",
             }
         }
         rewrite_log(
@@ -289,6 +317,9 @@ def annotate_log_locked(
     write_rrd: bool = True,
     force: bool = False,
     progress: Progress | None = None,
+    lidar: str | None = None,
+    avia: str | None = None,
+    truth: str | None = None,
 ) -> AnnotateReport:
     """:func:`annotate_log` while holding an exclusive lock on the log (a second run refuses).
 
@@ -303,7 +334,15 @@ def annotate_log_locked(
     check_output(output if output is not None else log, "annotated log", force=force)
     with lock_file(log, "log"):
         return annotate_log(
-            log, config=config, output=output, rrd=rrd, write_rrd=write_rrd, progress=progress
+            log,
+            config=config,
+            output=output,
+            rrd=rrd,
+            write_rrd=write_rrd,
+            progress=progress,
+            lidar=lidar,
+            avia=avia,
+            truth=truth,
         )
 
 
@@ -316,6 +355,9 @@ def annotate_logs(
     workers: int = 1,
     force: bool = False,
     progress: Progress | None = None,
+    lidar: str | None = None,
+    avia: str | None = None,
+    truth: str | None = None,
 ) -> tuple[list[AnnotateReport], list[tuple[Path, str]]]:
     """Annotate several logs, in parallel processes when ``workers > 1``.
 
@@ -331,6 +373,7 @@ def annotate_logs(
         workers: processes; 1 runs in this process (with per-frame progress).
         force: rewrite read-only logs (their mode is kept).
         progress: one unit per frame (single worker) or per log (several).
+        lidar, avia, truth: the topics to read in every log (as :func:`annotate_log`).
 
     Returns:
         (reports of the logs done, in the order given; (log, error message) of those that failed).
@@ -351,6 +394,9 @@ def annotate_logs(
                     write_rrd=write_rrd,
                     force=force,
                     progress=progress,
+                    lidar=lidar,
+                    avia=avia,
+                    truth=truth,
                 )
             except CldetError as err:
                 failures.append((Path(log), str(err)))
@@ -370,6 +416,9 @@ def annotate_logs(
                 output=targets[i],
                 write_rrd=write_rrd,
                 force=force,
+                lidar=lidar,
+                avia=avia,
+                truth=truth,
             ): i
             for i, log in enumerate(logs)
         }

@@ -224,13 +224,13 @@ def test_annotate_reads_the_log_once_and_writes_the_causal_estimate(
     import cldet.pipeline
 
     reads: list[str] = []
-    real = cldet.pipeline.iter_clouds
+    real = cldet.pipeline.iter_log_clouds
 
     def counting(log, topic, *args, **kwargs):  # type: ignore[no-untyped-def]
         reads.append(topic)
         return real(log, topic, *args, **kwargs)
 
-    monkeypatch.setattr(cldet.pipeline, "iter_clouds", counting)
+    monkeypatch.setattr(cldet.pipeline, "iter_log_clouds", counting)
     out = tmp_path / "once.mcap"
     report = annotate_log(source_log, output=out, write_rrd=False)
     assert sorted(reads) == ["/lidar_360", "/livox_avia"]  # one pass: each cloud topic once

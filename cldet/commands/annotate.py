@@ -22,7 +22,11 @@ class Method(str, Enum):
 @app.command()
 def annotate(
     logs: Annotated[
-        list[Path], typer.Argument(help="MCAP logs written by `cldet convert`.", show_default=False)
+        list[Path],
+        typer.Argument(
+            help="MCAP logs written by `cldet convert`, or ROS 2 recordings in MCAP.",
+            show_default=False,
+        ),
     ],
     method: Annotated[
         Method | None,
@@ -62,6 +66,30 @@ def annotate(
             "--force", help="Rewrite a read-only log (its mode is kept). Default: refuse."
         ),
     ] = False,
+    lidar: Annotated[
+        str | None,
+        typer.Option(
+            metavar="TOPIC",
+            help="The LiDAR's point-cloud topic: foxglove.PointCloud, sensor_msgs/msg/PointCloud2 "
+            "or Livox CustomMsg. Default: /lidar_360, else the log's only point-cloud topic.",
+        ),
+    ] = None,
+    avia: Annotated[
+        str | None,
+        typer.Option(
+            metavar="TOPIC",
+            help="The Avia's point-cloud topic, fused with the LiDAR's (moved into its frame by "
+            "the log's /tf_static when present). Default: /livox_avia with /lidar_360, else none.",
+        ),
+    ] = None,
+    truth: Annotated[
+        str | None,
+        typer.Option(
+            metavar="TOPIC",
+            help="Ground-truth positions (PoseInFrame, PointStamped, PoseStamped) for the "
+            "reported error. Default: /ground_truth when present.",
+        ),
+    ] = None,
 ) -> None:
     """Estimate the drone's 3D position at every Mid-360 frame and add the results to each log.
 
@@ -70,6 +98,10 @@ def annotate(
     an earlier annotation is replaced. New channels:
     /cldet/estimate, /cldet/pose, /cldet/trajectory, /cldet/clusters, /cldet/foreground, and a
     `cldet.config` metadata record with the method and effective configuration.
+
+    ROS 2 recordings (`ros2 bag record` writes MCAP) are read as they are: name the topics,
+    e.g. `cldet annotate rec.mcap --lidar /livox/lidar --avia /livox/avia`. Each frame is dated
+    by its header stamp (a Livox CustomMsg: its timebase), not by the time it was recorded.
 
     A Rerun recording (clouds, foreground, clusters, estimated and true trajectories, error over
     time, track events) is written beside each log: open it with `rerun LOG.rrd`.
@@ -100,6 +132,9 @@ def annotate(
                     write_rrd=not no_rrd,
                     force=force,
                     progress=bar,
+                    lidar=lidar,
+                    avia=avia,
+                    truth=truth,
                 )
                 reports, failures = [report], list[tuple[Path, str]]()
             else:
@@ -110,6 +145,9 @@ def annotate(
                     workers=workers or os.cpu_count() or 1,
                     force=force,
                     progress=bar,
+                    lidar=lidar,
+                    avia=avia,
+                    truth=truth,
                 )
         for report in reports:
             typer.echo(report.describe())

@@ -54,6 +54,7 @@ from cldet.types import ClassSample, Cloud, Estimate, PositionSample, Source
 __all__ = [
     "LogReader",
     "decode_cloud",
+    "decode_xyz",
     "iter_classes",
     "iter_cloud_fields",
     "iter_clouds",
@@ -170,8 +171,21 @@ def decode_cloud(data: bytes) -> tuple[int, dict[str, NDArray[np.float32]]]:
 
 def _xyz_view(data: bytes) -> NDArray[np.float32]:
     """The (N, 3) x, y, z of a serialized PointCloud, a view when x, y, z are packed first."""
+    return decode_xyz(data)[2]
+
+
+def decode_xyz(data: bytes) -> tuple[int, str, NDArray[np.float32]]:
+    """``(stamp_ns, frame_id, (N, 3) x, y, z)`` of a serialized ``foxglove.PointCloud``.
+
+    The stamp is the message's own ``timestamp``; the points are a read-only view into ``data``
+    when x, y, z are packed first (a copy otherwise).
+
+    Raises:
+        ValueError: the message is malformed or x, y, z are not all FLOAT32 fields.
+    """
     header_bytes, start, length = _split_data_field(data)
     header = PointCloud.FromString(header_bytes)
+    stamp_ns = header.timestamp.seconds * 1_000_000_000 + header.timestamp.nanos
     stride = header.point_stride
     layout = {f.name: (f.offset, f.type) for f in header.fields}
     if any(layout.get(c, (None, None))[1] != _FLOAT32 for c in "xyz"):
@@ -181,9 +195,9 @@ def _xyz_view(data: bytes) -> NDArray[np.float32]:
     n = length // stride
     if layout["x"][0] == 0 and layout["y"][0] == 4 and layout["z"][0] == 8 and stride % 4 == 0:
         flat = np.frombuffer(data, dtype="<f4", count=n * stride // 4, offset=start)
-        return flat.reshape(n, stride // 4)[:, :3]
+        return stamp_ns, header.frame_id, flat.reshape(n, stride // 4)[:, :3]
     _, columns = decode_cloud(data)
-    return np.stack([columns["x"], columns["y"], columns["z"]], axis=1)
+    return stamp_ns, header.frame_id, np.stack([columns["x"], columns["y"], columns["z"]], axis=1)
 
 
 _DECOMPRESS: dict[str, Callable[[bytes, int], bytes]] = {
@@ -363,6 +377,14 @@ class LogReader:
                 schema = self._summary.schemas.get(channel.schema_id)
                 return schema.name if schema is not None else ""
         raise self._missing(topic)
+
+    def topic_types(self) -> dict[str, str]:
+        """The schema name of every topic (``""`` for schemaless channels), in channel order."""
+        out: dict[str, str] = {}
+        for channel in self._summary.channels.values():
+            schema = self._summary.schemas.get(channel.schema_id)
+            out.setdefault(channel.topic, schema.name if schema is not None else "")
+        return out
 
     def time_range(self) -> tuple[int, int]:
         """First and last message log times, integer ns (0, 0 for an empty log)."""
@@ -589,7 +611,7 @@ class LogReader:
             try:
                 points = _xyz_view(message.data)
             except _CORRUPT as err:
-                raise self._bad(topic, message, err) from err
+                raise self.message_error(topic, message, err) from err
             yield Cloud(stamp_ns=message.log_time, points=points)
 
     def iter_cloud_fields(
@@ -600,7 +622,7 @@ class LogReader:
             try:
                 _, columns = decode_cloud(message.data)
             except _CORRUPT as err:
-                raise self._bad(topic, message, err) from err
+                raise self.message_error(topic, message, err) from err
             yield message.log_time, columns
 
     def iter_positions(
@@ -617,7 +639,7 @@ class LogReader:
                     p = PoseInFrame.FromString(message.data).pose.position
                     xyz = (p.x, p.y, p.z)
             except _CORRUPT as err:
-                raise self._bad(topic, message, err) from err
+                raise self.message_error(topic, message, err) from err
             yield PositionSample(stamp_ns=message.log_time, position=np.array(xyz, np.float64))
 
     def iter_classes(
@@ -628,7 +650,7 @@ class LogReader:
             try:
                 label = ClassLabel.FromString(message.data)
             except _CORRUPT as err:
-                raise self._bad(topic, message, err) from err
+                raise self.message_error(topic, message, err) from err
             yield ClassSample(stamp_ns=message.log_time, class_id=int(label.class_id))
 
     def iter_estimates(
@@ -644,7 +666,7 @@ class LogReader:
                 est = EstimateMessage.FromString(message.data)
                 source = Source(est.source)
             except _CORRUPT as err:
-                raise self._bad(topic, message, err) from err
+                raise self.message_error(topic, message, err) from err
             yield (
                 Estimate(
                     stamp_ns=message.log_time,
@@ -656,7 +678,10 @@ class LogReader:
                 int(est.track_id),
             )
 
-    def _bad(self, topic: str, message: Message, err: BaseException) -> CorruptMessageError:
+    def message_error(
+        self, topic: str, message: Message, err: BaseException
+    ) -> CorruptMessageError:
+        """The error for a message of ``topic`` that cannot be decoded (names log, topic, stamp)."""
         stamp = message.log_time
         return CorruptMessageError(
             f"{self.path}: corrupt message on {topic} stamped {format_stamp(max(stamp, 0))} "

@@ -1,0 +1,288 @@
+"""ROS messages (ROS 1 and ROS 2) into cldet's plain data: point clouds, positions, transforms.
+
+The decoding is the ``rosbags`` library's (message definitions parsed from the log or the bag,
+CDR and ROS 1 serialization); this module picks the fields out of the decoded messages. Every
+stamp is integer nanoseconds from the message's own header (a Livox ``CustomMsg``: its
+``timebase``), never the time a recorder received it.
+
+Supported point clouds: ``sensor_msgs/msg/PointCloud2`` (x, y, z float32 or float64 at any
+offset, either byte order; other fields ignored), ``livox_ros_driver2/msg/CustomMsg`` and
+``livox_ros_driver/msg/CustomMsg``, ``sensor_msgs/msg/PointCloud`` (radar). Non-finite points
+are dropped. Positions: ``geometry_msgs/msg/PointStamped`` and ``PoseStamped``. Transforms:
+``tf2_msgs/msg/TFMessage`` (``/tf_static``).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Any, Final
+
+import numpy as np
+from numpy.typing import NDArray
+from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+
+__all__ = [
+    "CLOUD_TYPES",
+    "POSITION_TYPES",
+    "TF_MESSAGE",
+    "FrameTransform",
+    "StampedCloud",
+    "message_decoder",
+    "normalize_type",
+    "position_of",
+    "ros_cloud",
+    "static_transform",
+    "transforms_of",
+]
+
+POINT_CLOUD2: Final = "sensor_msgs/msg/PointCloud2"
+POINT_CLOUD: Final = "sensor_msgs/msg/PointCloud"  # ROS 1 era radar clouds: Point32[] points
+LIVOX_CUSTOM: Final = ("livox_ros_driver2/msg/CustomMsg", "livox_ros_driver/msg/CustomMsg")
+CLOUD_TYPES: Final = (POINT_CLOUD2, *LIVOX_CUSTOM, POINT_CLOUD)
+POINT_STAMPED: Final = "geometry_msgs/msg/PointStamped"
+POSE_STAMPED: Final = "geometry_msgs/msg/PoseStamped"
+POSITION_TYPES: Final = (POINT_STAMPED, POSE_STAMPED)
+TF_MESSAGE: Final = "tf2_msgs/msg/TFMessage"
+
+_NS_PER_S = 1_000_000_000
+# sensor_msgs/PointField datatype -> numpy type (without byte order)
+_POINT_FIELD_TYPES: Final = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
+_FLOATS: Final = {7: "f4", 8: "f8"}
+_IDL_SEPARATOR = "=" * 80 + "\n"
+
+
+def normalize_type(name: str) -> str:
+    """A ROS message type as ``pkg/msg/Name`` (ROS 1 writes ``pkg/Name``)."""
+    parts = name.strip("/").split("/")
+    if len(parts) == 2:
+        return f"{parts[0]}/msg/{parts[1]}"
+    return "/".join(parts)
+
+
+def message_decoder(
+    schema_name: str, schema_encoding: str, schema_data: bytes, message_encoding: str
+) -> Callable[[bytes], Any]:
+    """A function deserializing the messages of one MCAP schema (rosbags' deserializers).
+
+    Args:
+        schema_name: the message type, ``pkg/msg/Name`` or ``pkg/Name``.
+        schema_encoding: ``ros2msg``, ``ros2idl`` or ``ros1msg``.
+        schema_data: the message definition with its dependencies, as a ROS recorder stores it.
+        message_encoding: ``cdr`` (ROS 2) or ``ros1``.
+
+    Raises:
+        ValueError: the encodings are not ROS ones, or the definition cannot be parsed.
+    """
+    typename = normalize_type(schema_name)
+    text = schema_data.decode("utf-8", "replace")
+    try:
+        if schema_encoding in ("ros2msg", "ros1msg"):
+            types = get_types_from_msg(text, typename)
+        elif schema_encoding == "ros2idl":
+            types = {}
+            chunks = text.split(_IDL_SEPARATOR)[1:] if text.startswith(_IDL_SEPARATOR) else [text]
+            for chunk in chunks:
+                idl = chunk.split("\n", 1)[1] if chunk.startswith("IDL: ") else chunk
+                types.update(get_types_from_idl(idl))
+        else:
+            raise ValueError(f"schema encoding {schema_encoding!r} is not a ROS one")
+    except ValueError:
+        raise
+    except Exception as err:  # rosbags' TypesysError and its parser's errors
+        raise ValueError(f"cannot parse the definition of {schema_name}: {err}") from err
+    store = get_typestore(Stores.EMPTY)
+    store.register(types)
+    if message_encoding == "cdr":
+        return lambda raw: store.deserialize_cdr(raw, typename)
+    if message_encoding == "ros1":
+        return lambda raw: store.deserialize_ros1(raw, typename)
+    raise ValueError(f"message encoding {message_encoding!r} is not cdr or ros1")
+
+
+@dataclass(frozen=True)
+class StampedCloud:
+    """The points of one point-cloud message, with its own stamp and frame."""
+
+    stamp_ns: int  # the header stamp (a Livox CustomMsg: its timebase), integer ns
+    frame_id: str
+    points: NDArray[np.float32]  # (N, 3) x, y, z metres, finite rows only
+
+
+def header_stamp_ns(header: Any) -> int:
+    """A ``std_msgs/Header``'s stamp as integer nanoseconds."""
+    return int(header.stamp.sec) * _NS_PER_S + int(header.stamp.nanosec)
+
+
+def _finite(points: NDArray[np.float32]) -> NDArray[np.float32]:
+    keep = np.isfinite(points).all(axis=1)
+    return points if keep.all() else points[keep]
+
+
+def _point_cloud2_xyz(msg: Any) -> NDArray[np.float32]:
+    """x, y, z of a ``sensor_msgs/PointCloud2``, (N, 3) float32; ValueError says what is wrong."""
+    fields = {f.name: f for f in msg.fields}
+    listing = ", ".join(
+        f"{f.name} ({_POINT_FIELD_TYPES.get(f.datatype, f.datatype)})" for f in msg.fields
+    )
+    expected = "x, y, z fields of float32 or float64"
+    for axis in "xyz":
+        if axis not in fields:
+            raise ValueError(
+                f"PointCloud2 without a {axis} field; expected {expected}, found: {listing or 'no fields'}"
+            )
+        if fields[axis].datatype not in _FLOATS:
+            raise ValueError(
+                f"PointCloud2 field {axis} is {_POINT_FIELD_TYPES.get(fields[axis].datatype, fields[axis].datatype)}; expected {expected}"
+            )
+    step = int(msg.point_step)
+    for f in msg.fields:
+        size = np.dtype(_POINT_FIELD_TYPES.get(f.datatype, "u1")).itemsize * max(int(f.count), 1)
+        if f.offset + size > step:
+            raise ValueError(
+                f"PointCloud2 point_step {step} is smaller than its fields "
+                f"({f.name} at offset {f.offset} takes {size} bytes)"
+            )
+    width, height, row_step = int(msg.width), int(msg.height), int(msg.row_step)
+    if width and height and row_step < width * step:
+        raise ValueError(f"PointCloud2 row_step {row_step} < width {width} x point_step {step}")
+    data = np.asarray(msg.data, dtype=np.uint8)
+    needed = (height - 1) * row_step + width * step if width and height else 0
+    if len(data) < needed:
+        raise ValueError(
+            f"PointCloud2 data is truncated: {len(data)} bytes for {height} x {width} points "
+            f"of {step} bytes (expected {needed})"
+        )
+    if not needed:
+        return np.zeros((0, 3), np.float32)
+    order = ">" if msg.is_bigendian else "<"
+    dtype = np.dtype(
+        {
+            "names": ["x", "y", "z"],
+            "formats": [order + _FLOATS[fields[a].datatype] for a in "xyz"],
+            "offsets": [int(fields[a].offset) for a in "xyz"],
+            "itemsize": step,
+        }
+    )
+    grid = np.ndarray((height, width), dtype=dtype, buffer=data, strides=(row_step, step))
+    points = np.empty((height * width, 3), np.float32)
+    for i, axis in enumerate("xyz"):
+        points[:, i] = grid[axis].reshape(-1)
+    return points
+
+
+def _point_list_xyz(points: Iterable[Any]) -> NDArray[np.float32]:
+    """(N, 3) float32 of a list of messages with x, y, z (Livox CustomPoint, Point32)."""
+    xyz = np.array([(p.x, p.y, p.z) for p in points], dtype=np.float32)
+    return xyz.reshape(-1, 3)
+
+
+def ros_cloud(msg: Any, typename: str) -> StampedCloud:
+    """The stamp, frame and finite points of a decoded point-cloud message of ``typename``.
+
+    Raises:
+        ValueError: the type is not a supported point cloud, or the message is malformed (a
+            PointCloud2 without x, y, z, a point_step smaller than its fields, truncated data).
+    """
+    typename = normalize_type(typename)
+    if typename == POINT_CLOUD2:
+        points = _point_cloud2_xyz(msg)
+        stamp = header_stamp_ns(msg.header)
+    elif typename in LIVOX_CUSTOM:
+        points = _point_list_xyz(msg.points)
+        stamp = int(msg.timebase)
+    elif typename == POINT_CLOUD:
+        points = _point_list_xyz(msg.points)
+        stamp = header_stamp_ns(msg.header)
+    else:
+        raise ValueError(
+            f"{typename} is not a point cloud; expected one of {', '.join(CLOUD_TYPES)}"
+        )
+    return StampedCloud(
+        stamp_ns=stamp, frame_id=msg.header.frame_id.lstrip("/"), points=_finite(points)
+    )
+
+
+def position_of(msg: Any, typename: str) -> tuple[int, NDArray[np.float64]]:
+    """``(stamp_ns, (3,) float64)`` of a decoded ``PointStamped`` or ``PoseStamped``.
+
+    Raises:
+        ValueError: the type is neither.
+    """
+    typename = normalize_type(typename)
+    if typename == POINT_STAMPED:
+        p = msg.point
+    elif typename == POSE_STAMPED:
+        p = msg.pose.position
+    else:
+        raise ValueError(
+            f"{typename} is not a position; expected one of {', '.join(POSITION_TYPES)}"
+        )
+    return header_stamp_ns(msg.header), np.array((p.x, p.y, p.z), dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class FrameTransform:
+    """A rigid transform taking points in ``child`` coordinates into ``parent`` coordinates."""
+
+    parent: str
+    child: str
+    matrix: NDArray[np.float64]  # (4, 4) homogeneous
+
+
+def _quaternion_matrix(x: float, y: float, z: float, w: float) -> NDArray[np.float64]:
+    norm = np.sqrt(x * x + y * y + z * z + w * w)
+    if norm == 0:
+        raise ValueError("a transform with a zero quaternion")
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def transforms_of(msg: Any) -> list[FrameTransform]:
+    """The transforms of a decoded ``tf2_msgs/TFMessage``."""
+    out: list[FrameTransform] = []
+    for t in msg.transforms:
+        tr, q = t.transform.translation, t.transform.rotation
+        matrix = np.eye(4)
+        matrix[:3, :3] = _quaternion_matrix(q.x, q.y, q.z, q.w)
+        matrix[:3, 3] = (tr.x, tr.y, tr.z)
+        out.append(
+            FrameTransform(t.header.frame_id.lstrip("/"), t.child_frame_id.lstrip("/"), matrix)
+        )
+    return out
+
+
+def static_transform(
+    transforms: Iterable[FrameTransform], target: str, source: str
+) -> NDArray[np.float64] | None:
+    """The (4, 4) transform taking points in frame ``source`` into frame ``target``.
+
+    Follows the tree both ways (parent to child and back) from ``source`` to ``target``; the
+    identity when the frames are the same; None when no chain of transforms connects them.
+    """
+    target, source = target.lstrip("/"), source.lstrip("/")
+    edges: dict[str, list[tuple[str, NDArray[np.float64]]]] = {}
+    for t in transforms:  # a later transform of the same pair wins: listed first
+        edges.setdefault(t.child, []).insert(0, (t.parent, t.matrix))
+        edges.setdefault(t.parent, []).insert(
+            0, (t.child, np.asarray(np.linalg.inv(t.matrix), np.float64))
+        )
+    # breadth-first from source; each entry: frame, transform source -> frame
+    seen = {source}
+    queue: deque[tuple[str, NDArray[np.float64]]] = deque([(source, np.eye(4))])
+    while queue:
+        frame, to_frame = queue.popleft()
+        if frame == target:
+            return to_frame
+        for nxt, step in edges.get(frame, []):
+            if nxt not in seen:
+                seen.add(nxt)
+                queue.append((nxt, step @ to_frame))
+    return None
