@@ -36,7 +36,13 @@ _HELP = (
     "file or folder at fault, the others are still "
     "converted, and the exit code is 1."
     "\n\n"
-    "Examples: `cldet convert data -o logs`; "
+    "ROOT may also be a ROS bag: a ROS 1 .bag file or a ROS 2 bag folder (.db3 or .mcap), read "
+    "through rosbags (no ROS installation). It becomes OUT/<name>.mcap with the same channels, "
+    "every message at its header stamp; --lidar-topic, --avia-topic, --radar-topic and "
+    "--truth-topic choose the bag topics (defaults: the MMAUD raw recordings' topics; a truth "
+    "topic ending in / is a prefix; an empty value leaves a channel out)."
+    "\n\n"
+    "Examples: `cldet convert data -o logs`; `cldet convert seq1.bag -o logs`; "
     "`cldet convert data -o logs --split val --sequence seq0001 --no-images`. "
     "Then open a log with `rerun logs/val/seq0001.mcap` or in Foxglove."
 )
@@ -105,10 +111,54 @@ def convert(
         bool,
         typer.Option("--overwrite", help="Replace existing logs. Default: skip (and report) them."),
     ] = False,
+    lidar_topic: Annotated[
+        str,
+        typer.Option(metavar="TOPIC", help="ROS bags: the Mid-360's point clouds (/lidar_360)."),
+    ] = "/livox_mid360/lidar",
+    avia_topic: Annotated[
+        str,
+        typer.Option(metavar="TOPIC", help="ROS bags: the Avia's point clouds (/livox_avia)."),
+    ] = "/livox_avia/lidar",
+    radar_topic: Annotated[
+        str,
+        typer.Option(metavar="TOPIC", help="ROS bags: the radar's clouds (/radar_enhance_pcl)."),
+    ] = "/radar_enhance_pcl",
+    truth_topic: Annotated[
+        str,
+        typer.Option(
+            metavar="TOPIC",
+            help="ROS bags: PointStamped or PoseStamped truth (/ground_truth); a trailing / "
+            "takes the first topic under it.",
+        ),
+    ] = "/leica/point/",
 ) -> None:
     """Convert the challenge dataset to MCAP logs, one per sequence (see --help)."""
     from cldet.progress import BarProgress
     from converters.mcap_convert import convert_dataset
+    from converters.rosbag import BagTopics, convert_bag_file, is_bag
+
+    if is_bag(root):
+        chosen = BagTopics(
+            lidar=lidar_topic,
+            avia=avia_topic or None,
+            radar=radar_topic or None,
+            truth=truth_topic or None,
+        )
+        target = out / f"{root.stem}.mcap"
+        with handled(), BarProgress() as bar:
+            counts = convert_bag_file(
+                root,
+                target,
+                bag_topics=chosen,
+                compression=compression.value,
+                overwrite=overwrite,
+                progress=bar,
+            )
+        typer.echo(
+            f"converted {root} -> {target}: "
+            + ", ".join(f"{n} on {topic}" for topic, n in counts.items())
+        )
+        return
 
     with handled(), BarProgress() as bar, warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
