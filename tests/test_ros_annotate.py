@@ -300,3 +300,54 @@ def test_a_wrong_type_or_a_missing_topic_names_what_exists(tmp_path: Path) -> No
     ok = cli_run("annotate", log, "--lidar", "/scan", "--no-rrd")
     assert ok.exit_code == 0, ok.output
     assert list_topics(log)["/cldet/estimate"] == 1
+
+
+# --- the real sample, recorded the ROS 2 way -----------------------------------------------------
+def _rms_against(log: Path, reference: list) -> float:
+    """RMS distance of the log's refined estimate (nearest in time) to each reference position."""
+    estimates = [e for e, _ in iter_estimates(log)]
+    stamps = np.array([e.stamp_ns for e in estimates])
+    d = [
+        np.linalg.norm(estimates[int(np.argmin(np.abs(stamps - r.stamp_ns)))].position - r.position)
+        for r in reference
+    ]
+    return float(np.sqrt(np.mean(np.square(d))))
+
+
+def test_real_sample_as_a_ros2_log_scores_like_the_challenge_log(
+    real_sample: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import warnings
+
+    from converters import mmaud
+    from converters.mcap_convert import convert_dataset
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the sample's reference/ folder is not a split
+        convert_dataset(real_sample, tmp_path / "logs", splits=["val"], workers=1)
+        (seq,) = mmaud.find_sequences(real_sample, splits=["val"])
+    challenge = tmp_path / "logs" / "val" / "seq0001.mcap"
+    annotate_log(challenge, write_rrd=False)
+    ros_log = tmp_path / "seq0001-ros2.mcap"
+    clouds = [
+        (c.stamp_ns, topic, c.points)
+        for modality, topic in (("lidar_360", "/livox/lidar"), ("livox_avia", "/livox/avia"))
+        for c in mmaud.iter_clouds(seq, modality)
+    ]
+    with Ros2Log(ros_log) as w:
+        for stamp, topic, points in sorted(clouds, key=lambda c: c[0]):
+            message = point_cloud2(stamp, "livox_frame", points)
+            w.write(topic, PC2, POINT_CLOUD2, message, stamp + LATE_NS)
+    result = cli_run(
+        "annotate", ros_log, "--lidar", "/livox/lidar", "--avia", "/livox/avia", "--no-rrd"
+    )
+    assert result.exit_code == 0, result.output
+    reference = list(mmaud.iter_positions(real_sample / "reference" / "seq0001"))
+    rms_challenge = _rms_against(challenge, reference)
+    rms_ros = _rms_against(ros_log, reference)
+    with capsys.disabled():
+        print(
+            f"\nreal sample RMS vs reference: challenge log {rms_challenge:.4f} m, ROS 2 log {rms_ros:.4f} m"
+        )
+    assert rms_challenge < 0.2
+    assert abs(rms_ros - rms_challenge) < 0.01
