@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rosbags.highlevel import AnyReader
+from rosbags.highlevel import AnyReader, AnyReaderError
 
 from cldet import __version__
 from cldet.errors import CldetError, DatasetError
@@ -110,7 +110,7 @@ def convert_bag(
     try:
         reader = AnyReader([Path(bag)])
         reader.open()
-    except Exception as err:  # rosbags' reader errors, a missing or unreadable file
+    except (AnyReaderError, OSError) as err:  # not a bag, a missing or unreadable file
         raise DatasetError(f"{bag} is not a readable ROS bag: {err}") from err
     try:
         types = {name: info.msgtype or "" for name, info in reader.topics.items()}
@@ -208,7 +208,7 @@ def _items(bag: Path, reader: AnyReader, targets: dict[str, str]) -> Iterator[tu
             else:
                 cloud = ros.ros_cloud(message, connection.msgtype)
                 yield cloud.stamp_ns, channel, cloud
-        except Exception as err:  # rosbags' decoding errors and a malformed cloud
+        except (AnyReaderError, ValueError) as err:  # bytes that do not decode, a bad cloud
             raise DatasetError(
                 f"{bag}: the message on {connection.topic} recorded at {log_ns} ns cannot be "
                 f"read as {connection.msgtype}: {err}"

@@ -52,6 +52,11 @@ CUSTOM_MSG = (
     "uint8[3] rsvd\nCustomPoint[] points\n"
 )
 
+CUSTOM_MSG2 = (
+    f"{CUSTOM_MSG}{SEP}MSG: std_msgs/Header\n{HEADER}{SEP}MSG: builtin_interfaces/Time\n{TIME}"
+    f"{SEP}MSG: livox_ros_driver2/CustomPoint\n{CUSTOM_POINT}"
+)
+
 FIELD_TYPES = {"i1": 1, "u1": 2, "i2": 3, "u2": 4, "i4": 5, "u4": 6, "f4": 7, "f8": 8}
 
 
@@ -113,6 +118,29 @@ def point_cloud2(
         "row_step": at * len(points),
         "data": records.tobytes() if data is None else data,
         "is_dense": False,
+    }
+
+
+def custom_msg_dict(stamp_ns: int, frame_id: str, points: np.ndarray) -> dict[str, Any]:
+    """A Livox CustomMsg (as a dict for mcap-ros2-support), stamped by its timebase only."""
+    return {
+        "header": {"stamp": ros_time(0), "frame_id": frame_id},  # the driver's header: unused
+        "timebase": stamp_ns,
+        "point_num": len(points),
+        "lidar_id": 1,
+        "rsvd": [0, 0, 0],
+        "points": [
+            {
+                "offset_time": i,
+                "x": float(p[0]),
+                "y": float(p[1]),
+                "z": float(p[2]),
+                "reflectivity": 9,
+                "tag": 0,
+                "line": i % 4,
+            }
+            for i, p in enumerate(points)
+        ],
     }
 
 

@@ -19,11 +19,13 @@ from cldet.io.mcap_read import iter_estimates, list_topics, open_log
 from cldet.io.sources import iter_log_clouds, iter_log_positions, select_topics
 from cldet.pipeline import annotate_log
 from tests.ros_writers import (
+    CUSTOM_MSG2,
     POINT_CLOUD2,
     POINT_STAMPED,
     STRING,
     TF_MESSAGE,
     Ros2Log,
+    custom_msg_dict,
     point_cloud2,
     ros_time,
     tf_static,
@@ -351,3 +353,87 @@ def test_real_sample_as_a_ros2_log_scores_like_the_challenge_log(
         )
     assert rms_challenge < 0.2
     assert abs(rms_ros - rms_challenge) < 0.01
+
+
+# --- other encodings and messages in MCAP ------------------------------------------------------
+def test_livox_custom_msg_in_a_ros2_log_is_read_at_its_timebase(tmp_path: Path) -> None:
+    rng = np.random.default_rng(6)
+    expected = [_points(rng, 30) for _ in range(2)]
+    expected[0][4] = np.nan
+    log = tmp_path / "livox.mcap"
+    with Ros2Log(log) as w:
+        for i, points in enumerate(expected):
+            stamp = T0 + i * 100_000_000
+            message = custom_msg_dict(stamp, "livox_frame", points)
+            w.write(
+                "/livox/lidar",
+                "livox_ros_driver2/msg/CustomMsg",
+                CUSTOM_MSG2,
+                message,
+                stamp + LATE_NS,
+            )
+    got = list(iter_log_clouds(log, "/livox/lidar"))
+    assert [c.stamp_ns for c in got] == [T0, T0 + 100_000_000]
+    np.testing.assert_array_equal(got[0].points, np.delete(expected[0], 4, axis=0))
+    np.testing.assert_array_equal(got[1].points, expected[1])
+    with open_log(log) as reader:
+        assert select_topics(reader).lidar == "/livox/lidar"
+
+
+def test_ros1_messages_in_mcap_are_read_too(tmp_path: Path) -> None:
+    """An MCAP log of ROS 1 messages (ros1msg schemas): mcap's writer, rosbags' serializer."""
+    from mcap.writer import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    typestore = get_typestore(Stores.ROS1_NOETIC)
+    types = typestore.types
+    points = _points(np.random.default_rng(7), 25)
+    header = types["std_msgs/msg/Header"](
+        seq=3,
+        stamp=types["builtin_interfaces/msg/Time"](sec=T0 // 10**9, nanosec=T0 % 10**9),
+        frame_id="/lidar",
+    )
+    message = types["sensor_msgs/msg/PointCloud2"](
+        header=header,
+        height=1,
+        width=len(points),
+        fields=[
+            types["sensor_msgs/msg/PointField"](name=c, offset=4 * i, datatype=7, count=1)
+            for i, c in enumerate("xyz")
+        ],
+        is_bigendian=False,
+        point_step=12,
+        row_step=12 * len(points),
+        data=np.ascontiguousarray(points, "<f4").reshape(-1).view(np.uint8),
+        is_dense=True,
+    )
+    log = tmp_path / "ros1.mcap"
+    text, _ = typestore.generate_msgdef(PC2)
+    with open(log, "wb") as f:
+        writer = Writer(f)
+        writer.start(profile="ros1")
+        schema = writer.register_schema("sensor_msgs/PointCloud2", "ros1msg", text.encode())
+        channel = writer.register_channel("/points", "ros1", schema)
+        writer.add_message(
+            channel, T0 + LATE_NS, bytes(typestore.serialize_ros1(message, PC2)), T0 + LATE_NS
+        )
+        writer.finish()
+    (cloud,) = iter_log_clouds(log, "/points")
+    assert cloud.stamp_ns == T0 and cloud.frame_id == "lidar"
+    np.testing.assert_array_equal(cloud.points, points)
+
+
+def test_bytes_that_do_not_decode_are_a_corrupt_message(tmp_path: Path) -> None:
+    from mcap.writer import Writer
+
+    log = tmp_path / "bad-cdr.mcap"
+    with open(log, "wb") as f:
+        writer = Writer(f)
+        writer.start(profile="ros2")
+        schema = writer.register_schema(PC2, "ros2msg", POINT_CLOUD2.encode())
+        channel = writer.register_channel("/points", "cdr", schema)
+        writer.add_message(channel, T0, b"\x00\x01\x00\x00\x07", T0)  # a header cut short
+        writer.finish()
+    before = log.read_bytes()
+    assert_error(cli_run("annotate", log), str(log), "corrupt message on /points")
+    assert_untouched(log, before)

@@ -21,7 +21,13 @@ from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
-from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+from rosbags.typesys import (
+    Stores,
+    TypesysError,
+    get_types_from_idl,
+    get_types_from_msg,
+    get_typestore,
+)
 
 __all__ = [
     "CLOUD_TYPES",
@@ -77,20 +83,18 @@ def message_decoder(
     """
     typename = normalize_type(schema_name)
     text = schema_data.decode("utf-8", "replace")
+    if schema_encoding not in ("ros2msg", "ros1msg", "ros2idl"):
+        raise ValueError(f"schema encoding {schema_encoding!r} is not a ROS one")
     try:
-        if schema_encoding in ("ros2msg", "ros1msg"):
-            types = get_types_from_msg(text, typename)
-        elif schema_encoding == "ros2idl":
+        if schema_encoding == "ros2idl":
             types = {}
             chunks = text.split(_IDL_SEPARATOR)[1:] if text.startswith(_IDL_SEPARATOR) else [text]
             for chunk in chunks:
                 idl = chunk.split("\n", 1)[1] if chunk.startswith("IDL: ") else chunk
                 types.update(get_types_from_idl(idl))
         else:
-            raise ValueError(f"schema encoding {schema_encoding!r} is not a ROS one")
-    except ValueError:
-        raise
-    except Exception as err:  # rosbags' TypesysError and its parser's errors
+            types = get_types_from_msg(text, typename)
+    except TypesysError as err:
         raise ValueError(f"cannot parse the definition of {schema_name}: {err}") from err
     store = get_typestore(Stores.EMPTY)
     store.register(types)

@@ -21,6 +21,7 @@ from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
+from rosbags.serde import SerdeError
 
 from cldet.errors import LogError
 from cldet.io import ros, topics
@@ -39,6 +40,8 @@ __all__ = [
 ]
 
 TF_STATIC: Final = "/tf_static"
+# what bytes that do not decode raise (cldet's readers, protobuf, rosbags), and a bad cloud
+_UNDECODABLE: tuple[type[BaseException], ...] = (*_CORRUPT, SerdeError)
 CLOUD_SCHEMAS: Final = (topics.SCHEMA_POINT_CLOUD, *ros.CLOUD_TYPES)
 POSITION_SCHEMAS: Final = (topics.SCHEMA_POSE_IN_FRAME, topics.SCHEMA_ESTIMATE, *ros.POSITION_TYPES)
 
@@ -163,12 +166,8 @@ def _iter_decoded(
         kind = _kind(schema.name if schema is not None else "")
         try:
             yield convert(kind, schema, channel, message.data)
-        except _CORRUPT as err:
+        except _UNDECODABLE as err:  # the bytes do not decode, or not as expected
             raise reader.message_error(topic, message, err) from err
-        except Exception as err:  # rosbags' SerdeError and friends: the bytes do not decode
-            if type(err).__module__.startswith("rosbags"):
-                raise reader.message_error(topic, message, err) from err
-            raise
 
 
 def _iter_clouds(reader: LogReader, topic: str) -> Iterator[ros.StampedCloud]:
