@@ -6,7 +6,8 @@ Writes N clouds of M points (float32, Mid-360-like ranges) twice: with cldet's `
 and optionally an ``intensity`` field, as a Livox driver publishes), both zstd. Then reads every
 cloud to an (N, 3) float32 array through ``cldet.io.sources.iter_log_clouds`` (what annotate
 uses) and prints clouds/s, points/s and the ratio. Target: PointCloud2 within 1.5x of
-foxglove.PointCloud.
+foxglove.PointCloud. Also a Livox ``CustomMsg`` log (fewer clouds: slow to write), read by
+cldet's byte reader and by rosbags' deserializer (the reason for the byte reader).
 
     python benchmarks/bench_ros_read.py [--clouds 300] [--points 20000] [--repeat 3]
 
@@ -26,10 +27,17 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the tests' ROS writers
 
-from cldet.io import topics  # noqa: E402
+from cldet.io import ros, topics  # noqa: E402
+from cldet.io.mcap_read import open_log  # noqa: E402
 from cldet.io.mcap_write import LogWriter  # noqa: E402
 from cldet.io.sources import iter_log_clouds  # noqa: E402
-from tests.ros_writers import POINT_CLOUD2, Ros2Log, point_cloud2  # noqa: E402
+from tests.ros_writers import (  # noqa: E402
+    CUSTOM_MSG2,
+    POINT_CLOUD2,
+    Ros2Log,
+    custom_msg_dict,
+    point_cloud2,
+)
 
 T0 = 1_706_255_621_600_227_000
 
@@ -58,6 +66,7 @@ def main() -> None:
     parser.add_argument("--clouds", type=int, default=300)
     parser.add_argument("--points", type=int, default=20000)
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--livox-clouds", type=int, default=30, help="(slow to write)")
     args = parser.parse_args()
     clouds = _clouds(args.clouds, args.points)
     with tempfile.TemporaryDirectory() as tmp:
@@ -78,18 +87,56 @@ def main() -> None:
                     )
             logs[f"PointCloud2 {name}"] = (path, "/livox/lidar")
 
+        livox = Path(tmp) / "livox.mcap"
+        with Ros2Log(livox) as log:
+            for i, points in enumerate(clouds[: args.livox_clouds]):
+                stamp = T0 + i * 100_000_000
+                message = custom_msg_dict(stamp, "livox_frame", points)
+                log.write(
+                    "/livox/lidar", "livox_ros_driver2/msg/CustomMsg", CUSTOM_MSG2, message, stamp
+                )
+
         def reader(path: Path, topic: str) -> Callable[[], int]:
             return lambda: sum(len(c.points) for c in iter_log_clouds(path, topic))
 
-        print(f"{args.clouds} clouds of {args.points} points, best of {args.repeat}")
+        def library(path: Path, topic: str) -> Callable[[], int]:
+            """rosbags' deserializer, then the points picked from its objects."""
+
+            def read() -> int:
+                with open_log(path) as log:
+                    n = 0
+                    for schema, channel, message in log.iter_messages([topic]):
+                        assert schema is not None
+                        decode = ros.message_decoder(
+                            schema.name, schema.encoding, schema.data, channel.message_encoding
+                        )
+                        n += len(ros.ros_cloud(decode(message.data), schema.name).points)
+                    return n
+
+            return read
+
+        runs = [
+            (name, path, reader(path, topic), args.clouds) for name, (path, topic) in logs.items()
+        ]
+        runs += [
+            ("Livox CustomMsg", livox, reader(livox, "/livox/lidar"), args.livox_clouds),
+            (
+                "Livox CustomMsg via rosbags",
+                livox,
+                library(livox, "/livox/lidar"),
+                args.livox_clouds,
+            ),
+        ]
+        print(f"clouds of {args.points} points, best of {args.repeat}")
         base = None
-        for name, (path, topic) in logs.items():
-            seconds, n = _time(reader(path, topic), args.repeat)
-            base = base or seconds
+        for name, path, read, n_clouds in runs:
+            seconds, n = _time(read, args.repeat)
+            per_cloud = seconds / n_clouds
+            base = base or per_cloud
             size = path.stat().st_size / 1e6
             print(
-                f"{name:28s} {size:7.1f} MB  {args.clouds / seconds:7.0f} clouds/s  "
-                f"{n / seconds / 1e6:6.1f} M points/s  {seconds / base:4.2f}x the foxglove time"
+                f"{name:28s} {n_clouds:4d} clouds {size:6.1f} MB {1 / per_cloud:7.0f} clouds/s "
+                f"{n / seconds / 1e6:6.1f} M points/s  {per_cloud / base:6.2f}x the foxglove time"
             )
 
 

@@ -13,6 +13,7 @@ raw MMAUD recordings' topics.
 from __future__ import annotations
 
 import heapq
+import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -198,9 +199,16 @@ def _static_transforms(reader: AnyReader, types: dict[str, str]) -> list[ros.Fra
 def _items(bag: Path, reader: AnyReader, targets: dict[str, str]) -> Iterator[tuple[int, str, Any]]:
     """``(stamp_ns, log channel, StampedCloud or (3,) position)`` in bag order."""
     connections = [c for c in reader.connections if c.topic in targets]
+    encoding = "cdr" if reader.is2 else "ros1"
+    fast = {c.id: ros.livox_decoder(reader.typestore, c.msgtype, encoding) for c in connections}
     for connection, log_ns, raw in reader.messages(connections=connections):
         channel = targets[connection.topic]
         try:
+            livox = fast[connection.id]
+            if livox is not None:  # Livox CustomMsg: straight from the bytes
+                cloud = livox(raw)
+                yield cloud.stamp_ns, channel, cloud
+                continue
             message = reader.deserialize(raw, connection.msgtype)
             if channel == topics.GROUND_TRUTH:
                 stamp, position = ros.position_of(message, connection.msgtype)
@@ -208,7 +216,7 @@ def _items(bag: Path, reader: AnyReader, targets: dict[str, str]) -> Iterator[tu
             else:
                 cloud = ros.ros_cloud(message, connection.msgtype)
                 yield cloud.stamp_ns, channel, cloud
-        except (AnyReaderError, ValueError) as err:  # bytes that do not decode, a bad cloud
+        except (AnyReaderError, ValueError, struct.error) as err:  # undecodable, a bad cloud
             raise DatasetError(
                 f"{bag}: the message on {connection.topic} recorded at {log_ns} ns cannot be "
                 f"read as {connection.msgtype}: {err}"

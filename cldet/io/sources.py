@@ -143,15 +143,16 @@ def select_topics(
 
 
 class _Decoders:
-    """One deserializer per schema of a log, built on first use."""
+    """One decoder per schema of a log, made by ``factory`` (a ``cldet.io.ros`` one) on first use."""
 
-    def __init__(self) -> None:
+    def __init__(self, factory: Callable[[str, str, bytes, str], Callable[[bytes], Any]]) -> None:
+        self._factory = factory
         self._by_schema: dict[int, Callable[[bytes], Any]] = {}
 
     def decode(self, schema: Any, channel: Any, data: bytes) -> Any:
         decoder = self._by_schema.get(channel.schema_id)
         if decoder is None:
-            decoder = ros.message_decoder(
+            decoder = self._factory(
                 schema.name, schema.encoding, schema.data, channel.message_encoding
             )
             self._by_schema[channel.schema_id] = decoder
@@ -171,13 +172,14 @@ def _iter_decoded(
 
 
 def _iter_clouds(reader: LogReader, topic: str) -> Iterator[ros.StampedCloud]:
-    decoders = _Decoders()
+    decoders = _Decoders(ros.cloud_decoder)
 
     def convert(kind: str, schema: Any, channel: Any, data: bytes) -> ros.StampedCloud:
         if kind == topics.SCHEMA_POINT_CLOUD:
             stamp_ns, frame_id, points = decode_xyz(data)
             return ros.StampedCloud(stamp_ns, frame_id, points)
-        return ros.ros_cloud(decoders.decode(schema, channel, data), kind)
+        cloud: ros.StampedCloud = decoders.decode(schema, channel, data)
+        return cloud
 
     return _iter_decoded(reader, topic, convert)
 
@@ -186,7 +188,7 @@ def read_static_transforms(reader: LogReader) -> list[ros.FrameTransform]:
     """Every transform on the log's ``/tf_static`` (``tf2_msgs/msg/TFMessage``); [] without one."""
     if _kind(reader.topic_types().get(TF_STATIC, "")) != ros.TF_MESSAGE:
         return []
-    decoders = _Decoders()
+    decoders = _Decoders(ros.message_decoder)
 
     def convert(kind: str, schema: Any, channel: Any, data: bytes) -> list[ros.FrameTransform]:
         return ros.transforms_of(decoders.decode(schema, channel, data))
@@ -243,7 +245,7 @@ def iter_log_positions(path: str | os.PathLike[str], topic: str) -> Iterator[Pos
     Raises:
         LogError: the log cannot be read; CorruptMessageError: a message does not decode.
     """
-    decoders = _Decoders()
+    decoders = _Decoders(ros.message_decoder)
 
     def convert(kind: str, schema: Any, channel: Any, data: bytes) -> PositionSample:
         stamp, xyz = ros.position_of(decoders.decode(schema, channel, data), kind)
