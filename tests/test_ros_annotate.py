@@ -206,12 +206,17 @@ def test_a_ros2_log_annotates_like_the_cldet_log(sim: tuple[Path, Path], tmp_pat
 
 
 # --- topic choice ----------------------------------------------------------------------------
-def test_the_only_point_cloud_topic_is_the_lidar(tmp_path: Path) -> None:
-    rng = np.random.default_rng(2)
-    log = tmp_path / "one.mcap"
+def write_chatter_and_scan(log: Path) -> Path:
+    """A log of one std_msgs/String on /chatter and one PointCloud2 on /scan."""
+    points = _points(np.random.default_rng(2))
     with Ros2Log(log) as w:
         w.write("/chatter", "std_msgs/msg/String", STRING, {"data": "hi"}, T0)
-        w.write("/scan", PC2, POINT_CLOUD2, point_cloud2(T0, "l", _points(rng)), T0 + LATE_NS)
+        w.write("/scan", PC2, POINT_CLOUD2, point_cloud2(T0, "l", points), T0 + LATE_NS)
+    return log
+
+
+def test_the_only_point_cloud_topic_is_the_lidar(tmp_path: Path) -> None:
+    log = write_chatter_and_scan(tmp_path / "one.mcap")
     with open_log(log) as reader:
         assert select_topics(reader).lidar == "/scan"
 
@@ -277,11 +282,7 @@ def test_a_malformed_point_cloud2_is_a_clear_error_and_nothing_is_written(
 
 
 def test_a_wrong_type_or_a_missing_topic_names_what_exists(tmp_path: Path) -> None:
-    rng = np.random.default_rng(5)
-    log = tmp_path / "types.mcap"
-    with Ros2Log(log) as w:
-        w.write("/chatter", "std_msgs/msg/String", STRING, {"data": "hi"}, T0)
-        w.write("/scan", PC2, POINT_CLOUD2, point_cloud2(T0, "l", _points(rng)), T0 + LATE_NS)
+    log = write_chatter_and_scan(tmp_path / "types.mcap")
     before = log.read_bytes()
     assert_error(
         cli_run("annotate", log, "--lidar", "/chatter"),
