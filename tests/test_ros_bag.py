@@ -147,6 +147,13 @@ def test_a_ros1_bag_converts_annotates_and_evaluates(
             np.testing.assert_array_equal(a.points, b.points)
     truth = list(iter_positions(log, topics.GROUND_TRUTH))
     assert [t.stamp_ns for t in truth] == [t.stamp_ns for t in mmaud.iter_ground_truth(sequence)]
+    # a second conversion skips the existing log, as for the numpy folders; --overwrite replaces
+    before = log.read_bytes()
+    result = cli_run("convert", bag, "-o", tmp_path / "logs")
+    assert result.exit_code == 0 and "skipped existing log" in result.output, result.output
+    assert log.read_bytes() == before
+    result = cli_run("convert", bag, "-o", tmp_path / "logs", "--overwrite")
+    assert result.exit_code == 0 and "converted" in result.output, result.output
     # annotate, export (queries at the truth's stamps) and evaluate the log
     result = cli_run("annotate", log, "--no-rrd")
     assert result.exit_code == 0, result.output

@@ -145,6 +145,9 @@ def convert(
             truth=truth_topic or None,
         )
         target = out / f"{root.stem}.mcap"
+        if target.exists() and not overwrite:  # as for the numpy folders: skipped, reported
+            typer.echo(f"skipped existing log {target} (use --overwrite to replace it)")
+            return
         with handled(), BarProgress() as bar:
             counts = convert_bag_file(
                 root,
