@@ -270,10 +270,9 @@ class SmoothingConfig(BaseModel):
         default=2.0, gt=0, description="white-acceleration PSD of the smoother"
     )
     extrapolation_tau_s: float = Field(
-        default=4.0,
+        default=1.5,
         gt=0,
-        description="beyond the detections the velocity decays with this time constant (a"
-        " drone cruising at 15 m/s takes seconds to turn or stop, not a fraction of one)",
+        description="beyond the detections the velocity decays with this time constant",
     )
 
 
