@@ -46,6 +46,17 @@ class FramesConfig(BaseModel):
         description="a frame's points are dated at its stamp plus this (the middle of the"
         " Mid-360's 100 ms scan): a fast drone's estimate no longer leads the truth",
     )
+    avia_xyz_m: tuple[float, float, float] = Field(
+        default=(0.0, 0.0, 0.0),
+        description="the Avia's origin in the LiDAR's frame, used when a log's /tf_static does"
+        " not connect their frames (the challenge's Avia clouds are already in the Mid-360's"
+        " frame: zero)",
+    )
+    avia_rpy_deg: tuple[float, float, float] = Field(
+        default=(0.0, 0.0, 0.0),
+        description="the Avia's roll, pitch, yaw in the LiDAR's frame (degrees, about the fixed"
+        " x, y, z axes), with avia_xyz_m",
+    )
 
 
 class BackgroundConfig(BaseModel):

@@ -24,9 +24,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from cldet import __version__
-from cldet.config import CldetConfig, config_to_dict
+from cldet.config import CldetConfig, FramesConfig, config_to_dict
 from cldet.core.estimator import FrameDetections, SequenceEstimate, make_estimator
 from cldet.core.frames import pair_frames
 from cldet.errors import CldetError, FrameOrderError
@@ -81,9 +83,20 @@ class AnnotateReport:
         return "; ".join(parts)
 
 
-def _frames(log: Path, sensors: SensorTopics) -> Iterator[LidarFrame]:
+def _avia_extrinsic(cfg: FramesConfig) -> NDArray[np.float64] | None:
+    """The configured Avia-to-LiDAR transform (4x4), None when it is the identity."""
+    if not any(cfg.avia_xyz_m) and not any(cfg.avia_rpy_deg):
+        return None
+    matrix = np.eye(4)
+    matrix[:3, :3] = Rotation.from_euler("xyz", cfg.avia_rpy_deg, degrees=True).as_matrix()
+    matrix[:3, 3] = cfg.avia_xyz_m
+    return matrix
+
+
+def _frames(log: Path, sensors: SensorTopics, cfg: FramesConfig) -> Iterator[LidarFrame]:
     """The LiDAR's frames paired with the Avia's, both streamed (one pass over each topic)."""
     lidar_frame: list[str] = []  # the LiDAR's frame id, from its first cloud
+    extrinsic = _avia_extrinsic(cfg)
 
     def lidar() -> Iterator[Cloud]:
         for cloud in iter_log_clouds(log, sensors.lidar):
@@ -96,7 +109,12 @@ def _frames(log: Path, sensors: SensorTopics) -> Iterator[LidarFrame]:
         # for the first LiDAR cloud before the first Avia cloud
         into = lambda: lidar_frame[0] if lidar_frame else None  # noqa: E731
         for cloud in iter_log_clouds(log, topic, target_frame=into):
-            yield Cloud(stamp_ns=cloud.stamp_ns, points=cloud.points)
+            points = cloud.points
+            if extrinsic is not None and lidar_frame and cloud.frame_id != lidar_frame[0]:
+                # not moved by /tf_static: the configured extrinsic
+                moved = points.astype(np.float64) @ extrinsic[:3, :3].T + extrinsic[:3, 3]
+                points = moved.astype(np.float32)
+            yield Cloud(stamp_ns=cloud.stamp_ns, points=points)
 
     return pair_frames(lidar(), avia(sensors.avia) if sensors.avia else iter(()))
 
@@ -166,7 +184,7 @@ def annotate_log(
         progress.start(n_frames, f"{sequence}: tracking")
         detections: list[FrameDetections] = []
         try:
-            for frame in _frames(log, sensors):
+            for frame in _frames(log, sensors, config.frames):
                 found_here = estimator.register_frame(frame)
                 detections.append(found_here)
                 view.log_frame(frame, found_here)

@@ -114,6 +114,30 @@ def test_the_avia_is_moved_into_the_lidar_frame_by_tf_static(tmp_path: Path) -> 
     np.testing.assert_array_equal(kept.points, points)
 
 
+def test_without_tf_static_the_configured_avia_extrinsic_applies(tmp_path: Path) -> None:
+    from cldet.config import load_config
+    from cldet.io.sources import SensorTopics
+    from cldet.pipeline import _frames
+
+    rng = np.random.default_rng(2)
+    lidar, avia = _points(rng), _points(rng)
+    log = tmp_path / "no_tf.mcap"
+    with Ros2Log(log) as w:
+        w.write("/lidar", PC2, POINT_CLOUD2, point_cloud2(T0, "lidar", lidar), T0 + LATE_NS)
+        w.write("/avia", PC2, POINT_CLOUD2, point_cloud2(T0, "avia", avia), T0 + LATE_NS)
+    sensors = SensorTopics(lidar="/lidar", avia="/avia")
+    turned = load_config(
+        overrides={"frames": {"avia_xyz_m": (1.0, 2.0, 3.0), "avia_rpy_deg": (0.0, 0.0, 90.0)}}
+    )
+    (frame,) = _frames(log, sensors, turned.frames)
+    expected = np.column_stack([-avia[:, 1] + 1.0, avia[:, 0] + 2.0, avia[:, 2] + 3.0])
+    np.testing.assert_allclose(frame.avia, expected, atol=1e-5)
+    np.testing.assert_array_equal(frame.mid360, lidar)
+    # the default: the challenge's layout, the Avia already in the LiDAR's frame
+    (frame,) = _frames(log, sensors, load_config().frames)
+    np.testing.assert_array_equal(frame.avia, avia)
+
+
 def test_static_transform_inverts_and_chains() -> None:
     turn = ros.FrameTransform(
         "a", "b", np.array([[0, -1, 0, 1], [1, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
