@@ -50,7 +50,10 @@ __all__ = ["find_lines"]
 
 _NIS95 = 7.81  # 95 % point of chi^2, 3 dof: a detection at the tolerance
 _END_FIT = 8  # inliers nearest an end that predict the line beyond it
-_MAX_SEEDS = 200_000
+# a sequence crowded with candidates keeps its closest seed pairs only: this many per frame, so
+# that the cap scales with the sequence's length (and at least _MIN_SEED_CAP)
+_SEEDS_PER_FRAME = 2_500
+_MIN_SEED_CAP = 200_000
 _TIME_SCALE_M_PER_S = 1e4  # space-time lookups: 0.01 s apart is 100 m apart  # a frame crowded with candidates: keep the closest pairs only
 
 
@@ -147,9 +150,10 @@ def _seeds(pool: _Pool, times_s: NDArray[np.float64], cfg: TrackingConfig) -> ND
     if not pairs:
         return np.zeros((0, 2), dtype=np.int64)
     out = np.concatenate(pairs)
-    if len(out) > _MAX_SEEDS:
+    cap = max(_SEEDS_PER_FRAME * len(times_s), _MIN_SEED_CAP)
+    if len(out) > cap:
         gap = pool.t[out[:, 1]] - pool.t[out[:, 0]]
-        out = out[np.argsort(gap, kind="stable")[:_MAX_SEEDS]]
+        out = out[np.argsort(gap, kind="stable")[:cap]]
     return out
 
 
