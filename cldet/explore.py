@@ -27,6 +27,7 @@ from cldet.core.estimator import fuse_points
 from cldet.core.frames import pair_frames, valid_points
 from cldet.core.trajectory import evaluate_trajectory
 from cldet.results import normalise_sequence, read_truth
+from cldet.stamps import NS_PER_S
 from cldet.types import Estimate, LidarFrame, Source
 from converters.mmaud import SequenceRef, iter_clouds, iter_ground_truth, iter_positions
 
@@ -54,8 +55,6 @@ __all__ = [
     "truth_at",
     "truth_histograms",
 ]
-
-NS_PER_S = 1_000_000_000
 
 
 # --------------------------------------------------------------------------- data access

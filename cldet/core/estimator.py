@@ -70,6 +70,7 @@ from cldet.core.selection import (
 from cldet.core.smoothing import extrapolate, rts_smooth
 from cldet.core.tracking import ActiveTracks, CandidateTracker, ClusterTable, cross_section
 from cldet.errors import FrameOrderError
+from cldet.stamps import NS_PER_S
 from cldet.types import Cluster, Estimate, LidarFrame, Source
 
 __all__ = [
@@ -83,7 +84,6 @@ __all__ = [
     "make_estimator",
 ]
 
-NS_PER_S = 1_000_000_000
 _LOST_AFTER_S = 0.5  # a gap without detection longer than this is reported as lost/reacquired
 _SWITCH_RATIO = 1.3  # causal choice: a challenger must have this much more evidence
 _JUDGE_STATIC_S = 1.0  # causal: a track must live this long before it is judged static

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-NS_PER_S = 1_000_000_000
+from cldet.stamps import NS_PER_S
 
 
 def evaluate_trajectory(

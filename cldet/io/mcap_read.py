@@ -48,7 +48,7 @@ from cldet.io import topics
 from cldet.io.mcap_append import AppendPlan, copy_prefix, plan_append
 from cldet.io.schemas import ClassLabel
 from cldet.io.schemas import Estimate as EstimateMessage
-from cldet.stamps import format_stamp
+from cldet.stamps import NS_PER_S, format_stamp
 from cldet.types import ClassSample, Cloud, Estimate, PositionSample, Source
 
 __all__ = [
@@ -165,7 +165,7 @@ def decode_cloud(data: bytes) -> tuple[int, dict[str, NDArray[np.float32]]]:
         {"names": names, "formats": ["<f4"] * len(names), "offsets": offsets, "itemsize": stride}
     )
     records = np.frombuffer(data, dtype=dtype, count=n, offset=start)
-    stamp_ns = header.timestamp.seconds * 1_000_000_000 + header.timestamp.nanos
+    stamp_ns = header.timestamp.seconds * NS_PER_S + header.timestamp.nanos
     return stamp_ns, {name: records[name] for name in names}
 
 
@@ -185,7 +185,7 @@ def decode_xyz(data: bytes) -> tuple[int, str, NDArray[np.float32]]:
     """
     header_bytes, start, length = _split_data_field(data)
     header = PointCloud.FromString(header_bytes)
-    stamp_ns = header.timestamp.seconds * 1_000_000_000 + header.timestamp.nanos
+    stamp_ns = header.timestamp.seconds * NS_PER_S + header.timestamp.nanos
     stride = header.point_stride
     layout = {f.name: (f.offset, f.type) for f in header.fields}
     if any(layout.get(c, (None, None))[1] != _FLOAT32 for c in "xyz"):

@@ -46,13 +46,13 @@ from cldet.io.files import atomic_output
 from cldet.io.mcap_append import AppendPlan, AppendWriter
 from cldet.io.schemas import ClassLabel, file_descriptor_set
 from cldet.io.schemas import Estimate as EstimateMessage
+from cldet.stamps import NS_PER_S
 from cldet.types import Cluster, Estimate
 
 __all__ = ["Compression", "LogWriter", "atomic_output", "png_size"]
 
 DEFAULT_CHUNK_SIZE = 1 << 20  # bytes of uncompressed messages per chunk: ~20 Mid-360 frames
 
-_NS_PER_S = 1_000_000_000
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _XYZ = ("x", "y", "z")
 
@@ -83,7 +83,7 @@ def _varint(value: int) -> bytes:
 
 
 def _timestamp(stamp_ns: int) -> Timestamp:
-    seconds, nanos = divmod(stamp_ns, _NS_PER_S)
+    seconds, nanos = divmod(stamp_ns, NS_PER_S)
     return Timestamp(seconds=seconds, nanos=nanos)
 
 

@@ -33,6 +33,8 @@ from rosbags.typesys import (
 from rosbags.typesys.base import Nodetype
 from rosbags.typesys.store import Typestore
 
+from cldet.stamps import NS_PER_S
+
 __all__ = [
     "CLOUD_TYPES",
     "POSITION_TYPES",
@@ -58,7 +60,6 @@ POSE_STAMPED: Final = "geometry_msgs/msg/PoseStamped"
 POSITION_TYPES: Final = (POINT_STAMPED, POSE_STAMPED)
 TF_MESSAGE: Final = "tf2_msgs/msg/TFMessage"
 
-_NS_PER_S = 1_000_000_000
 # sensor_msgs/PointField datatype -> numpy type (without byte order)
 _POINT_FIELD_TYPES: Final = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
 _FLOATS: Final = {7: "f4", 8: "f8"}
@@ -153,7 +154,7 @@ class StampedCloud:
 
 def header_stamp_ns(header: Any) -> int:
     """A ``std_msgs/Header``'s stamp as integer nanoseconds."""
-    return int(header.stamp.sec) * _NS_PER_S + int(header.stamp.nanosec)
+    return int(header.stamp.sec) * NS_PER_S + int(header.stamp.nanosec)
 
 
 def _finite(points: NDArray[np.float32]) -> NDArray[np.float32]:
