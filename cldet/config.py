@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import difflib
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Final, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -30,6 +30,11 @@ __all__ = [
 ]
 
 _STRICT = ConfigDict(extra="forbid", frozen=True)
+
+
+TRAINING_MEAN_POSITION_M: Final[tuple[float, float, float]] = (0.734, -9.739, 33.353)
+"""The mean drone position of the challenge's training split (metres, Mid-360 frame): the
+position of last resort when there is no estimate at all."""
 
 
 class FramesConfig(BaseModel):
@@ -268,7 +273,7 @@ class TrackingConfig(BaseModel):
         description="lines slower than this are left to the Kalman tracker (m/s)",
     )
     fallback_position: tuple[float, float, float] = Field(
-        default=(0.734, -9.739, 33.353), description="used only when no track exists at all"
+        default=TRAINING_MEAN_POSITION_M, description="used only when no track exists at all"
     )
 
 

@@ -30,6 +30,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from cldet.config import TRAINING_MEAN_POSITION_M
 from cldet.core.trajectory import evaluate_trajectory
 from cldet.errors import LogError, OutputExistsError, ResultsError
 from cldet.io import topics
@@ -46,8 +47,9 @@ from cldet.results import (
 from cldet.stamps import format_stamp
 from cldet.types import Source
 
-FALLBACK_POSITION_M: Final[tuple[float, float, float]] = (0.734, -9.739, 33.353)
-"""Position (metres, Mid-360 frame) for a sequence without any estimate: the training-set mean."""
+FALLBACK_POSITION_M: Final[tuple[float, float, float]] = TRAINING_MEAN_POSITION_M
+"""Position (metres, Mid-360 frame) for a sequence without any estimate: the training-set mean
+(the estimator's default ``tracking.fallback_position`` too)."""
 DEFAULT_CLASS_ID: Final = 0
 """Classification written for every row until a classifier exists."""
 DEFAULT_MAX_EXTRAPOLATION_NS: Final = 1_000_000_000
