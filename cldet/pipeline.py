@@ -105,16 +105,12 @@ def _frames(log: Path, sensors: SensorTopics, cfg: FramesConfig) -> Iterator[Lid
             yield Cloud(stamp_ns=cloud.stamp_ns, points=cloud.points)
 
     def avia(topic: str) -> Iterator[Cloud]:
-        # into the LiDAR's frame through the log's /tf_static when it has one; pair_frames asks
-        # for the first LiDAR cloud before the first Avia cloud
+        # into the LiDAR's frame through the log's /tf_static when it connects them, else by the
+        # configured extrinsic; pair_frames asks for the first LiDAR cloud before the first Avia
+        # cloud
         into = lambda: lidar_frame[0] if lidar_frame else None  # noqa: E731
-        for cloud in iter_log_clouds(log, topic, target_frame=into):
-            points = cloud.points
-            if extrinsic is not None and lidar_frame and cloud.frame_id != lidar_frame[0]:
-                # not moved by /tf_static: the configured extrinsic
-                moved = points.astype(np.float64) @ extrinsic[:3, :3].T + extrinsic[:3, 3]
-                points = moved.astype(np.float32)
-            yield Cloud(stamp_ns=cloud.stamp_ns, points=points)
+        for cloud in iter_log_clouds(log, topic, target_frame=into, fallback=extrinsic):
+            yield Cloud(stamp_ns=cloud.stamp_ns, points=cloud.points)
 
     return pair_frames(lidar(), avia(sensors.avia) if sensors.avia else iter(()))
 

@@ -19,7 +19,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from rosbags.highlevel import AnyReader, AnyReaderError
 
 from cldet import __version__
@@ -30,7 +29,6 @@ from cldet.progress import NullProgress, Progress
 
 __all__ = ["BagTopics", "convert_bag", "is_bag"]
 
-TF_STATIC = "/tf_static"
 _REORDER_NS = 1_000_000_000  # messages are written in header-stamp order within this window
 
 
@@ -161,9 +159,7 @@ def convert_bag(
                 if channel == topics.LIVOX_AVIA and lidar_frame and transforms:
                     matrix = ros.static_transform(transforms, lidar_frame[0], item.frame_id)
                     if matrix is not None:
-                        points = (
-                            points.astype(np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
-                        ).astype(np.float32)
+                        points = ros.transform_points(matrix, points)
                 frame = topics.FRAME_RADAR if channel == topics.RADAR else topics.FRAME_MID360
                 writer.write_cloud(channel, stamp_ns, points, frame)
             else:
@@ -187,9 +183,9 @@ def convert_bag(
 
 
 def _static_transforms(reader: AnyReader, types: dict[str, str]) -> list[ros.FrameTransform]:
-    if ros.normalize_type(types.get(TF_STATIC, "")) != ros.TF_MESSAGE:
+    if ros.normalize_type(types.get(ros.TF_STATIC, "")) != ros.TF_MESSAGE:
         return []
-    connections = [c for c in reader.connections if c.topic == TF_STATIC]
+    connections = [c for c in reader.connections if c.topic == ros.TF_STATIC]
     out: list[ros.FrameTransform] = []
     for connection, _, raw in reader.messages(connections=connections):
         out.extend(ros.transforms_of(reader.deserialize(raw, connection.msgtype)))

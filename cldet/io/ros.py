@@ -39,6 +39,7 @@ __all__ = [
     "CLOUD_TYPES",
     "POSITION_TYPES",
     "TF_MESSAGE",
+    "TF_STATIC",
     "FrameTransform",
     "cloud_decoder",
     "livox_decoder",
@@ -48,6 +49,7 @@ __all__ = [
     "position_of",
     "ros_cloud",
     "static_transform",
+    "transform_points",
     "transforms_of",
 ]
 
@@ -59,6 +61,7 @@ POINT_STAMPED: Final = "geometry_msgs/msg/PointStamped"
 POSE_STAMPED: Final = "geometry_msgs/msg/PoseStamped"
 POSITION_TYPES: Final = (POINT_STAMPED, POSE_STAMPED)
 TF_MESSAGE: Final = "tf2_msgs/msg/TFMessage"
+TF_STATIC: Final = "/tf_static"  # the topic of the static transforms
 
 # sensor_msgs/PointField datatype -> numpy type (without byte order)
 _POINT_FIELD_TYPES: Final = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
@@ -414,6 +417,14 @@ def _quaternion_matrix(x: float, y: float, z: float, w: float) -> NDArray[np.flo
             [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
         ]
     )
+
+
+def transform_points(
+    matrix: NDArray[np.float64], points: NDArray[np.floating]
+) -> NDArray[np.float32]:
+    """(N, 3) points moved by a (4, 4) transform, computed in float64, returned as float32."""
+    moved = points.astype(np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
+    return moved.astype(np.float32)
 
 
 def transforms_of(msg: Any) -> list[FrameTransform]:

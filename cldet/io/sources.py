@@ -39,7 +39,7 @@ __all__ = [
     "select_topics",
 ]
 
-TF_STATIC: Final = "/tf_static"
+TF_STATIC: Final = ros.TF_STATIC
 # what bytes that do not decode raise (cldet's readers, protobuf, rosbags), and a bad cloud
 _UNDECODABLE: tuple[type[BaseException], ...] = (*_CORRUPT, SerdeError)
 CLOUD_SCHEMAS: Final = (topics.SCHEMA_POINT_CLOUD, *ros.CLOUD_TYPES)
@@ -201,6 +201,7 @@ def iter_log_clouds(
     topic: str,
     *,
     target_frame: str | Callable[[], str | None] | None = None,
+    fallback: NDArray[np.float64] | None = None,
 ) -> Iterator[ros.StampedCloud]:
     """The clouds of one point-cloud topic, at their header stamps, in log order.
 
@@ -211,6 +212,8 @@ def iter_log_clouds(
         target_frame: move the points into this frame (or the one this function returns, asked
             at the first cloud) with the log's ``/tf_static`` when it connects the cloud's frame
             to it; the points stay as they are otherwise (and their ``frame_id`` with them).
+        fallback: the (4, 4) transform into ``target_frame`` for a cloud in another frame that
+            ``/tf_static`` does not connect to it (None: such a cloud stays as it is).
 
     Raises:
         LogError: the log cannot be read; CorruptMessageError: a message does not decode or is
@@ -220,21 +223,24 @@ def iter_log_clouds(
         transforms = read_static_transforms(reader) if target_frame is not None else []
         matrices: dict[str, NDArray[np.float64] | None] = {}
         for cloud in _iter_clouds(reader, topic):
-            if transforms and callable(target_frame):
+            if callable(target_frame):
                 target_frame = target_frame()
-            if not transforms or target_frame is None or callable(target_frame):
+            if target_frame is None or cloud.frame_id == target_frame:
                 yield cloud
                 continue
             if cloud.frame_id not in matrices:
-                matrices[cloud.frame_id] = ros.static_transform(
-                    transforms, target_frame, cloud.frame_id
+                found = (
+                    ros.static_transform(transforms, target_frame, cloud.frame_id)
+                    if transforms
+                    else None
                 )
+                matrices[cloud.frame_id] = found if found is not None else fallback
             matrix = matrices[cloud.frame_id]
-            if matrix is None or cloud.frame_id == target_frame:
+            if matrix is None:
                 yield cloud
                 continue
-            moved = cloud.points.astype(np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
-            yield ros.StampedCloud(cloud.stamp_ns, target_frame, moved.astype(np.float32))
+            points = ros.transform_points(matrix, cloud.points)
+            yield ros.StampedCloud(cloud.stamp_ns, target_frame, points)
 
 
 def iter_log_positions(path: str | os.PathLike[str], topic: str) -> Iterator[PositionSample]:
