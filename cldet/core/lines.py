@@ -39,12 +39,19 @@ within the tolerance by construction).
 
 from __future__ import annotations
 
+from typing import TypeVar
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from cldet.config import TrackingConfig
-from cldet.core.tracking import ClusterTable, TrackRecord, cross_section
+from cldet.core.tracking import (
+    ClusterTable,
+    TrackRecord,
+    constant_velocity_fit,
+    cross_section,
+)
 
 __all__ = ["find_lines"]
 
@@ -54,16 +61,8 @@ _END_FIT = 8  # inliers nearest an end that predict the line beyond it
 # that the cap scales with the sequence's length (and at least _MIN_SEED_CAP)
 _SEEDS_PER_FRAME = 2_500
 _MIN_SEED_CAP = 200_000
-_TIME_SCALE_M_PER_S = 1e4  # space-time lookups: 0.01 s apart is 100 m apart  # a frame crowded with candidates: keep the closest pairs only
-
-
-def _fit(t: NDArray[np.float64], p: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-    """Least-squares constant velocity: (position at mean time, velocity, mean time)."""
-    tm = float(t.mean())
-    tc = t - tm
-    den = float(tc @ tc)
-    v = (tc @ (p - p.mean(axis=0))) / den if den > 0 else np.zeros(3)
-    return p.mean(axis=0), v, np.array(tm)
+_Speed = TypeVar("_Speed", float, NDArray[np.float64])
+_TIME_SCALE_M_PER_S = 1e4  # space-time lookups: 0.01 s apart is 100 m apart
 
 
 class _Pool:
@@ -105,8 +104,7 @@ class _Pool:
         }
         # one space-time tree for lookups in many frames at once: time scaled so far apart that
         # no tolerance reaches from one frame into another
-        self._scale = _TIME_SCALE_M_PER_S
-        self._st = cKDTree(np.column_stack([self.pos, self.t * self._scale]))
+        self._st = cKDTree(np.column_stack([self.pos, self.t * _TIME_SCALE_M_PER_S]))
         self.used = np.zeros(len(self.frame), dtype=bool)
 
     def nearest(
@@ -118,7 +116,7 @@ class _Pool:
         if m == 0 or len(self.frame) == 0:
             return np.full(m, np.inf), np.full(m, -1, dtype=np.int64)
         k = min(3, len(self.frame))
-        query = np.column_stack([points, self.times[frames] * self._scale])
+        query = np.column_stack([points, self.times[frames] * _TIME_SCALE_M_PER_S])
         d, j = self._st.query(query, k=k, distance_upper_bound=tol)
         d, j = d.reshape(m, k), j.reshape(m, k)
         idx = np.where(j < len(self.frame), j, -1)
@@ -170,7 +168,7 @@ def _count(
     ta, tb = pool.t[a], pool.t[b]
     v = (pool.pos[b] - pool.pos[a]) / (tb - ta)[:, None]
     speed = np.linalg.norm(v, axis=1)
-    tol = cfg.line_tol_m + speed * half_scan_s
+    tol = _tolerance(speed, cfg, half_scan_s)
     place = 2.0 * tol  # along-line length of one place
     found_seed: list[NDArray[np.int64]] = []
     found_place: list[NDArray[np.int64]] = []
@@ -200,11 +198,11 @@ def _count(
     return np.bincount(key[:, 0], minlength=len(seeds))
 
 
-def _tolerance(v: NDArray[np.float64], cfg: TrackingConfig, half_scan_s: float) -> float:
+def _tolerance(speed: _Speed, cfg: TrackingConfig, half_scan_s: float) -> _Speed:
     """How far a cluster on the line may lie from its position at the frame's time: the
     centroid's noise plus the drone's travel over half a scan (a scan's points are taken over
     its whole duration)."""
-    return cfg.line_tol_m + float(np.linalg.norm(v)) * half_scan_s
+    return cfg.line_tol_m + speed * half_scan_s
 
 
 def _grow(
@@ -223,9 +221,13 @@ def _grow(
             (times_s >= t0 - cfg.line_window_s) & (times_s <= t1 + cfg.line_window_s)
         )
         fits = (
-            _fit(pool.t[idx[:_END_FIT]], pool.pos[idx[:_END_FIT]]),  # before the first inlier
-            _fit(pool.t[idx], pool.pos[idx]),  # between
-            _fit(pool.t[idx[-_END_FIT:]], pool.pos[idx[-_END_FIT:]]),  # after the last
+            constant_velocity_fit(
+                pool.t[idx[:_END_FIT]], pool.pos[idx[:_END_FIT]]
+            ),  # before the first inlier
+            constant_velocity_fit(pool.t[idx], pool.pos[idx]),  # between
+            constant_velocity_fit(
+                pool.t[idx[-_END_FIT:]], pool.pos[idx[-_END_FIT:]]
+            ),  # after the last
         )
         todo = np.array(
             [f for f in window.tolist() if f not in members and f in pool.trees], dtype=np.int64
@@ -238,15 +240,13 @@ def _grow(
         tol = np.empty(len(todo))
         for k, (p0, v, tm) in enumerate(fits):
             on = part == k
-            pred[on] = p0 + np.outer(tf[on] - float(tm), v)
-            tol[on] = _tolerance(v, cfg, half_scan_s)
+            pred[on] = p0 + np.outer(tf[on] - tm, v)
+            tol[on] = _tolerance(float(np.linalg.norm(v)), cfg, half_scan_s)
         d, j = pool.nearest(todo, pred, float(tol.max()))
         hit = d <= tol
-        for f, i in zip(todo[hit].tolist(), j[hit].tolist(), strict=True):
-            members[f] = i
-        added = bool(hit.any())
-        if not added:
+        if not hit.any():
             return idx
+        members.update(zip(todo[hit].tolist(), j[hit].tolist(), strict=True))
 
 
 def _sweep_deg(p: NDArray[np.float64]) -> float:
@@ -303,9 +303,9 @@ def find_lines(
         idx = _grow(pool, seeds[s], times_s, cfg, half_scan_s)
         tried[idx] = True
         t, p = pool.t[idx], pool.pos[idx]
-        p0, v, tm = _fit(t, p)
+        p0, v, tm = constant_velocity_fit(t, p)
         speed = float(np.linalg.norm(v))
-        tol = _tolerance(v, cfg, half_scan_s)
+        tol = _tolerance(speed, cfg, half_scan_s)
         if (
             speed < cfg.line_min_speed
             or speed > cfg.max_speed
@@ -314,7 +314,7 @@ def find_lines(
         ):
             continue
         pool.used[idx] = True
-        res = p - (p0 + np.outer(t - float(tm), v))
+        res = p - (p0 + np.outer(t - tm, v))
         nis = _NIS95 * np.minimum(np.einsum("ij,ij->i", res, res) / tol**2, 1.0)
         frames, clusters = pool.frame[idx], pool.cluster[idx]
         lines.append(

@@ -56,7 +56,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cldet.config import TrackingConfig
-from cldet.core.tracking import ClusterTable, TrackRecord, cross_section
+from cldet.core.tracking import ClusterTable, TrackRecord, constant_velocity_fit, cross_section
 
 __all__ = [
     "ScoredTrack",
@@ -85,12 +85,8 @@ class ScoredTrack:
 
 def _net_motion(t: NDArray[np.float64], pos: NDArray[np.float64]) -> float:
     """How far a least-squares constant-velocity fit moves over the track's time span, metres."""
-    span = float(t[-1] - t[0])
-    if span <= 0:
-        return 0.0
-    tc = t - t.mean()
-    velocity = (tc @ (pos - pos.mean(axis=0))) / float(tc @ tc)
-    return float(np.linalg.norm(velocity)) * span
+    _, velocity, _ = constant_velocity_fit(t, pos)
+    return float(np.linalg.norm(velocity)) * float(t[-1] - t[0])
 
 
 def _p90(x: NDArray[np.float64]) -> float:

@@ -40,6 +40,7 @@ __all__ = [
     "CandidateTracker",
     "ClusterTable",
     "TrackRecord",
+    "constant_velocity_fit",
     "cross_section",
 ]
 
@@ -112,6 +113,18 @@ def cross_section(
     """
     r2 = np.einsum("ij,ij->i", positions, positions)
     return (n_mid360 / cfg.mid360_points_per_sr + n_avia / cfg.avia_points_per_sr) * r2
+
+
+def constant_velocity_fit(
+    t: NDArray[np.float64], p: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """Least-squares constant velocity through positions ``p`` (H,3) at times ``t`` (H,): the
+    position at the mean time, the velocity (zero when all times are equal), the mean time."""
+    tm = float(t.mean())
+    tc = t - tm
+    den = float(tc @ tc)
+    v = (tc @ (p - p.mean(axis=0))) / den if den > 0 else np.zeros(3)
+    return p.mean(axis=0), v, tm
 
 
 @dataclass(frozen=True)
