@@ -16,6 +16,7 @@ from cldet.commands import (  # noqa: F401  (each module registers its commands)
     demo,
     results,
     simulate,
+    train,
 )
 from cldet.commands._app import app
 

@@ -14,8 +14,9 @@ Rules, all reported in the returned :class:`ExportReport`:
 - A query sequence with no log, or whose log was never annotated (or has no usable estimate),
   is an error; with ``allow_fallback`` (``--allow-fallback``) it gets the global constant
   :data:`FALLBACK_POSITION_M` (the training-set mean position) on every row, and a warning.
-- ``Classification`` is the constant :data:`DEFAULT_CLASS_ID` (no classifier yet) unless a
-  class id is given.
+- ``Classification`` is the log's final ``/cldet/class`` estimate (written by
+  ``cldet annotate --model``), else the constant :data:`DEFAULT_CLASS_ID`; a class id given
+  explicitly is written on every row instead.
 - Without a query file, the rows are each log's ``/ground_truth`` stamps (to score a split that
   has ground truth); logs without ground truth are skipped with a warning.
 """
@@ -51,7 +52,7 @@ FALLBACK_POSITION_M: Final[tuple[float, float, float]] = TRAINING_MEAN_POSITION_
 """Position (metres, Mid-360 frame) for a sequence without any estimate: the training-set mean
 (the estimator's default ``tracking.fallback_position`` too)."""
 DEFAULT_CLASS_ID: Final = 0
-"""Classification written for every row until a classifier exists."""
+"""Classification written for a log without a ``/cldet/class`` estimate (no model used)."""
 DEFAULT_MAX_EXTRAPOLATION_NS: Final = 1_000_000_000
 """How far beyond its first or last estimate a track's motion is followed by default (1 s); a
 query further out gets the position reached there. A drone at 10 m/s is 10 m away after 1 s:
@@ -69,6 +70,7 @@ class LogTrack:
     positions: NDArray[np.float64]  # (K, 3) metres, Mid-360 frame
     n_fallback_dropped: int  # FALLBACK estimates ignored because the track has its own
     annotated: bool = True  # the log has a /cldet/estimate channel (was annotated)
+    class_id: int | None = None  # the final /cldet/class estimate (None: no model was used)
 
 
 @dataclass(frozen=True)
@@ -121,6 +123,10 @@ def read_log_track(path: Path | str) -> LogTrack:
         positions: list[NDArray[np.float64]] = []
         fallback: list[bool] = []
         annotated = topics.ESTIMATE in log.list_topics()
+        class_id = None
+        if log.list_topics().get(topics.CLASS_ESTIMATE, 0) > 0:
+            for estimate_class in log.iter_class_estimates(topics.CLASS_ESTIMATE):
+                class_id = estimate_class.class_id  # the last one holds all the evidence
         if log.list_topics().get(topics.ESTIMATE, 0) > 0:
             for estimate, _track_id in log.iter_estimates(topics.ESTIMATE):
                 if np.all(np.isfinite(estimate.position)):
@@ -135,7 +141,9 @@ def read_log_track(path: Path | str) -> LogTrack:
         n_dropped = int(is_fallback.sum())
         stamps_ns, pos = stamps_ns[~is_fallback], pos[~is_fallback]
     order = np.argsort(stamps_ns, kind="stable")
-    return LogTrack(Path(path), sequence, split, stamps_ns[order], pos[order], n_dropped, annotated)
+    return LogTrack(
+        Path(path), sequence, split, stamps_ns[order], pos[order], n_dropped, annotated, class_id
+    )
 
 
 def read_log_truth(path: Path | str) -> list[TruthRow]:
@@ -177,7 +185,7 @@ def export_results(
     logs: Iterable[Path | str],
     out: Path | str,
     timestamps: Path | str | None = None,
-    class_id: int = DEFAULT_CLASS_ID,
+    class_id: int | None = None,
     *,
     overwrite: bool = False,
     max_extrapolation_ns: int | None = DEFAULT_MAX_EXTRAPOLATION_NS,
@@ -192,7 +200,8 @@ def export_results(
         timestamps: the query file (``test_timestamps.csv``); rows are written in its order with
             its Sequence and Timestamp strings. ``None``: a row at every ``/ground_truth`` stamp
             of every log, in log order.
-        class_id: the Classification of every row.
+        class_id: the Classification of every row; ``None``: each log's final ``/cldet/class``
+            estimate, else :data:`DEFAULT_CLASS_ID`.
         overwrite: replace an existing ``out``.
         max_extrapolation_ns: follow the track's motion at most this far beyond its first or
             last estimate, then hold (see :func:`~cldet.core.trajectory.evaluate_trajectory`);
@@ -302,8 +311,14 @@ def export_results(
     if unused:
         warnings.append(f"{len(unused)} logs have no query row: {', '.join(unused)}")
 
+    def row_class(sequence_key: str) -> int:
+        if class_id is not None:
+            return int(class_id)
+        track = tracks.get(sequence_key)
+        return DEFAULT_CLASS_ID if track is None or track.class_id is None else track.class_id
+
     rows = [
-        ResultRow(q.sequence, q.timestamp, q.stamp_ns, (p[0], p[1], p[2]), int(class_id))
+        ResultRow(q.sequence, q.timestamp, q.stamp_ns, (p[0], p[1], p[2]), row_class(q.key[0]))
         for q, p in zip(queries, positions.tolist(), strict=True)
     ]
     write_results(out_path, rows, overwrite=overwrite)

@@ -31,6 +31,7 @@ from cldet import __version__
 from cldet.config import CldetConfig, FramesConfig, config_to_dict
 from cldet.core.estimator import FrameDetections, SequenceEstimate, make_estimator
 from cldet.core.frames import pair_frames
+from cldet.core.model import LearnedModel
 from cldet.errors import CldetError, FrameOrderError
 from cldet.io import topics
 from cldet.io.files import check_output, lock_file
@@ -45,7 +46,7 @@ from cldet.io.sources import (
 )
 from cldet.progress import NullProgress, Progress
 from cldet.signals import init_worker, stop_workers
-from cldet.types import Cloud, Estimate, LidarFrame, Source
+from cldet.types import ClassEstimate, Cloud, Estimate, LidarFrame, Source
 from cldet.view import NullView, RerunView, View
 
 METADATA_ANNOTATE = topics.METADATA_CONFIG
@@ -93,7 +94,7 @@ def _avia_extrinsic(cfg: FramesConfig) -> NDArray[np.float64] | None:
     return matrix
 
 
-def _frames(log: Path, sensors: SensorTopics, cfg: FramesConfig) -> Iterator[LidarFrame]:
+def read_frames(log: Path, sensors: SensorTopics, cfg: FramesConfig) -> Iterator[LidarFrame]:
     """The LiDAR's frames paired with the Avia's, both streamed (one pass over each topic)."""
     lidar_frame: list[str] = []  # the LiDAR's frame id, from its first cloud
     extrinsic = _avia_extrinsic(cfg)
@@ -126,6 +127,7 @@ def annotate_log(
     lidar: str | None = None,
     avia: str | None = None,
     truth: str | None = None,
+    model: LearnedModel | None = None,
 ) -> AnnotateReport:
     """Estimate the drone's position at every Mid-360 frame of ``log`` and write the results back.
 
@@ -146,6 +148,9 @@ def annotate_log(
             with ``/lidar_360``, else none).
         truth: a ground-truth position topic for the reported error (default:
             ``/ground_truth`` when present).
+        model: a model from ``cldet train`` (``track`` only): its scan-time offset and bias
+            replace the configuration's, its scorer picks the drone's tracks and its classifier
+            writes ``/cldet/class``.
 
     Returns:
         An :class:`AnnotateReport`.
@@ -157,6 +162,8 @@ def annotate_log(
     """
     started = time.perf_counter()
     config = config or CldetConfig()
+    if model is not None:
+        config = model.configure(config)
     progress = progress or NullProgress()
     log = Path(log)
     output = Path(output) if output is not None else log
@@ -176,11 +183,11 @@ def annotate_log(
         rrd_path = Path(rrd) if rrd is not None else output.with_suffix(".rrd")
         view = RerunView(rrd_path, recording_name=f"cldet {sequence}")
     try:
-        estimator = make_estimator(config)
+        estimator = make_estimator(config, model)
         progress.start(n_frames, f"{sequence}: tracking")
         detections: list[FrameDetections] = []
         try:
-            for frame in _frames(log, sensors, config.frames):
+            for frame in read_frames(log, sensors, config.frames):
                 found_here = estimator.register_frame(frame)
                 detections.append(found_here)
                 view.log_frame(frame, found_here)
@@ -207,6 +214,7 @@ def annotate_log(
                 "lidar": sensors.lidar,
                 "avia": sensors.avia or "",
                 "truth": sensors.truth or "",
+                "model": "" if model is None else json.dumps(model.describe_source()),
             }
         }
         rewrite_log(
@@ -257,6 +265,8 @@ def result_additions(
       per estimate of the refined track;
     - ``/cldet/causal`` (cldet.Estimate): the causal estimate of each frame, as it was made
       from that frame and the ones before (what a live run shows);
+    - ``/cldet/class`` (cldet.ClassEstimate), with a model: the drone type and every class's
+      probability from the chosen track's evidence up to each second, the last one final;
     - ``/cldet/trajectory`` (foxglove.PosesInFrame): the whole smoothed trajectory, once, at the
       first frame's stamp, so a viewer shows it for the whole playback;
     - ``/cldet/clusters`` (foxglove.SceneUpdate) per frame: a box and label per cluster, the
@@ -269,6 +279,8 @@ def result_additions(
         additions.append((est.stamp_ns, _estimate_writer(est)))
     for est in result.causal:
         additions.append((est.stamp_ns, _causal_writer(est)))
+    for cls in result.classes:
+        additions.append((cls.stamp_ns, _class_writer(cls)))
     if result.estimates:
         first = result.estimates[0].stamp_ns
         positions = np.array([e.position for e in result.estimates], dtype=np.float64)
@@ -285,6 +297,13 @@ def _estimate_writer(est: Estimate) -> Addition:
     def write(writer: LogWriter) -> None:
         writer.write_estimate(topics.ESTIMATE, est.stamp_ns, est)
         writer.write_pose(topics.POSE, est.stamp_ns, est.position, topics.FRAME_MID360)
+
+    return write
+
+
+def _class_writer(estimate: ClassEstimate) -> Addition:
+    def write(writer: LogWriter) -> None:
+        writer.write_class_estimate(topics.CLASS_ESTIMATE, estimate)
 
     return write
 
@@ -334,6 +353,7 @@ def annotate_log_locked(
     lidar: str | None = None,
     avia: str | None = None,
     truth: str | None = None,
+    model: LearnedModel | None = None,
 ) -> AnnotateReport:
     """:func:`annotate_log` while holding an exclusive lock on the log (a second run refuses).
 
@@ -357,6 +377,7 @@ def annotate_log_locked(
             lidar=lidar,
             avia=avia,
             truth=truth,
+            model=model,
         )
 
 
@@ -372,6 +393,7 @@ def annotate_logs(
     lidar: str | None = None,
     avia: str | None = None,
     truth: str | None = None,
+    model: LearnedModel | None = None,
 ) -> tuple[list[AnnotateReport], list[tuple[Path, str]]]:
     """Annotate several logs, in parallel processes when ``workers > 1``.
 
@@ -388,6 +410,7 @@ def annotate_logs(
         force: rewrite read-only logs (their mode is kept).
         progress: one unit per frame (single worker) or per log (several).
         lidar, avia, truth: the topics to read in every log (as :func:`annotate_log`).
+        model: a model from ``cldet train`` (as :func:`annotate_log`).
 
     Returns:
         (reports of the logs done, in the order given; (log, error message) of those that failed).
@@ -411,6 +434,7 @@ def annotate_logs(
                     lidar=lidar,
                     avia=avia,
                     truth=truth,
+                    model=model,
                 )
             except CldetError as err:
                 failures.append((Path(log), str(err)))
@@ -433,6 +457,7 @@ def annotate_logs(
                 lidar=lidar,
                 avia=avia,
                 truth=truth,
+                model=model,
             ): i
             for i, log in enumerate(logs)
         }

@@ -45,7 +45,7 @@ FALLBACK (no track at all). ``sigma_m`` is the per-axis 1-sigma position uncerta
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Protocol
 
@@ -629,22 +629,26 @@ def chain_type_features(
     chain: list[tuple[ScoredTrack, int, int]],
     cand: Candidates,
     cfg: TrackingConfig,
-    until_s: Iterable[float] = (np.inf,),
-) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-    """For each time of ``until_s``: the features of the chain's tracks over their detections up
-    to then (T, F), and each one's weight in the vote (T,), the detections it gave the chain."""
+    until_s: Sequence[float] = (np.inf,),
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """The chain's tracks over their detections up to each time of ``until_s``: features
+    (T, F), each one's weight in the vote (T,: the detections it gave the chain) and the index
+    of its time in ``until_s`` (T,)."""
     parts = [(tr, i0, i1, track_detections(tr.record, cand.tables, cfg)) for tr, i0, i1 in chain]
-    out = []
-    for t in until_s:
-        feats, weights = [], []
+    feats, weights, groups = [], [], []
+    for g, t in enumerate(until_s):
         for tr, i0, i1, det in parts:
             upto = min(i1, int(np.searchsorted(tr.times_s, t, side="right")))
             if upto - i0 < 1 or upto < 2:
                 continue
             feats.append(track_features(tr.record, det, tr.times_s, upto))
             weights.append(float(upto - i0))
-        out.append((np.array(feats).reshape(-1, len(FEATURE_NAMES)), np.array(weights)))
-    return out
+            groups.append(g)
+    return (
+        np.array(feats).reshape(-1, len(FEATURE_NAMES)),
+        np.array(weights, dtype=np.float64),
+        np.array(groups, dtype=np.int64),
+    )
 
 
 def _classify(
@@ -660,18 +664,19 @@ def _classify(
     ticks = np.arange(t_s[0], t_s[-1], CLASS_EVERY_S) + CLASS_EVERY_S
     marks = sorted({int(i) for i in np.searchsorted(t_s, ticks)} | {len(t_s) - 1})
     marks = [m for m in marks if m < len(t_s)]
+    feats, weights, groups = chain_type_features(chain, cand, cfg, [t_s[f] for f in marks])
+    if len(groups) == 0:
+        return ()
+    proba = model.type_probabilities(feats, weights, groups)
+    seen = np.zeros(len(marks), dtype=bool)
+    seen[groups] = True
     out = []
-    for f, (feats, weights) in zip(
-        marks, chain_type_features(chain, cand, cfg, (t_s[f] for f in marks)), strict=True
-    ):
-        if len(feats) == 0:
-            continue
-        p = model.type_probabilities(feats, weights)
-        k = int(np.argmax(p))
+    for g in np.flatnonzero(seen):
+        p = proba[g]
         out.append(
             ClassEstimate(
-                int(stamps[f]),
-                model.class_ids[k],
+                int(stamps[marks[g]]),
+                model.class_ids[int(np.argmax(p))],
                 tuple(model.class_ids),
                 tuple(float(v) for v in p),
             )
@@ -743,13 +748,18 @@ def make_estimator(config: CldetConfig, model: LearnedModel | None = None) -> Es
 
 
 def estimate_sequence(
-    frames: Callable[[], Iterable[LidarFrame]] | Iterable[LidarFrame], config: CldetConfig
+    frames: Callable[[], Iterable[LidarFrame]] | Iterable[LidarFrame],
+    config: CldetConfig,
+    model: LearnedModel | None = None,
 ) -> tuple[list[FrameDetections], SequenceEstimate]:
     """Register every frame of a sequence (one pass, in stamp order), then refine.
 
-    ``frames`` is an iterable of frames, or a callable returning one (called once).
+    ``frames`` is an iterable of frames, or a callable returning one (called once). With a
+    ``model`` (``cldet train``) its offset and bias replace the configuration's.
     """
-    estimator = make_estimator(config)
+    if model is not None:
+        config = model.configure(config)
+    estimator = make_estimator(config, model)
     source = frames() if callable(frames) else frames
     detections = [estimator.register_frame(frame) for frame in source]
     return detections, estimator.refine()

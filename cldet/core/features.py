@@ -20,7 +20,13 @@ from numpy.typing import NDArray
 from cldet.config import TrackingConfig
 from cldet.core.tracking import ClusterTable, TrackRecord, constant_velocity_fit, cross_section
 
-__all__ = ["FEATURE_NAMES", "TrackDetections", "track_detections", "track_features"]
+__all__ = [
+    "FEATURE_NAMES",
+    "TYPE_FEATURES",
+    "TrackDetections",
+    "track_detections",
+    "track_features",
+]
 
 F64 = NDArray[np.float64]
 
@@ -34,7 +40,10 @@ FEATURE_NAMES: Final[tuple[str, ...]] = (
     "extent_med_m",  # largest box edge
     "extent_p90_m",
     "size_z_med_m",  # vertical box edge
+    "size_z_p90_m",
     "size_xy_med_m",  # larger horizontal box edge
+    "size_xy_p90_m",
+    "elevation_sin_med",  # sine of the line of sight's elevation (which faces the LiDAR sees)
     "log_cross_med",  # log10 of the cross-section, m^2
     "log_cross_p90",
     "log_points_med",  # log(1 + points per detection)
@@ -51,6 +60,19 @@ FEATURE_NAMES: Final[tuple[str, ...]] = (
     "net_motion_m",  # constant-velocity fit's displacement over the span
     "path_m",  # summed step lengths (with net_motion: does it go anywhere)
 )
+
+TYPE_FEATURES: Final[tuple[str, ...]] = (
+    "log_cross_med",
+    "log_cross_p90",
+    "elevation_sin_med",
+    "size_z_p90_m",
+    "size_xy_p90_m",
+    "log_range_med",
+)
+"""The features the drone-type classifier reads: what the airframe's size changes (the area
+that returned the points, seen from which side; the box the points span, and at what range the
+scan resolves it); not how it moves, which says more about the flight than about the airframe."""
+TYPE_COLUMNS: Final = tuple(FEATURE_NAMES.index(n) for n in TYPE_FEATURES)
 
 _NIS95 = 7.81
 _LOW_M = 2.0
@@ -154,7 +176,10 @@ def track_features(
             _nanmedian(np.where(cl, det.extent[:n], np.nan)),
             _nanpercentile(np.where(cl, det.extent[:n], np.nan), 90),
             _nanmedian(size[:, 2]),
+            _nanpercentile(size[:, 2], 90),
             _nanmedian(np.max(size[:, :2], axis=1)),
+            _nanpercentile(np.max(size[:, :2], axis=1), 90),
+            float(np.median(pos[:, 2] / np.maximum(rng, 1e-3))),
             float(np.median(log_cross)),
             float(np.percentile(log_cross, 90)),
             float(np.median(np.log1p(rec.n_points[:n]))),

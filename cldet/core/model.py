@@ -21,10 +21,11 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from cldet.core.features import FEATURE_NAMES
+from cldet.config import BiasConfig, CldetConfig
+from cldet.core.features import FEATURE_NAMES, TYPE_COLUMNS, TYPE_FEATURES
 from cldet.errors import CldetError
 
-__all__ = ["MODEL_FORMAT", "LearnedModel", "ModelError", "load_model"]
+__all__ = ["MODEL_FORMAT", "LearnedModel", "ModelError", "load_model", "one_thread"]
 
 MODEL_FORMAT: Final = 1
 """Version of the file layout; a model of another version is refused."""
@@ -32,6 +33,14 @@ MODEL_FORMAT: Final = 1
 _META = "model.json"
 _ESTIMATORS = "estimators.skops"
 _TRUSTED: Final = ["sklearn.ensemble._hist_gradient_boosting.predictor.TreePredictor"]
+
+
+def one_thread() -> Any:
+    """A context limiting OpenMP to one thread: scikit-learn's trees otherwise spin up a thread
+    per core for a few hundred rows, and parallel workers oversubscribe the machine."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="openmp")
 
 
 class ModelError(CldetError):
@@ -52,25 +61,52 @@ class LearnedModel:
     info: dict[str, Any] = field(default_factory=dict)  # trained on what, cross-validation
     feature_names: tuple[str, ...] = FEATURE_NAMES
 
+    def configure(self, config: CldetConfig) -> CldetConfig:
+        """``config`` with the model's scan-time offset and centroid bias."""
+        frames = config.frames.model_copy(update={"scan_offset_s": self.scan_offset_s})
+        bias = BiasConfig(along_ray_m=self.bias_along_ray_m, z_m=self.bias_z_m)
+        return config.model_copy(update={"frames": frames, "bias": bias})
+
+    def describe_source(self) -> dict[str, Any]:
+        """What the model is, for the annotated log's metadata."""
+        return {
+            "format": MODEL_FORMAT,
+            "class_ids": self.class_ids,
+            "scan_offset_s": self.scan_offset_s,
+            "bias": [self.bias_along_ray_m, self.bias_z_m],
+            "trained_on": len(self.info.get("trained_on", [])),
+        }
+
     def drone_probability(self, features: NDArray[np.float64]) -> NDArray[np.float64]:
         """(T,) probability that each track (features (T, F)) is the drone."""
         if self.scorer is None or len(features) == 0:
             return np.ones(len(features))
-        return np.asarray(self.scorer.predict_proba(features)[:, 1], dtype=np.float64)
+        with one_thread():
+            return np.asarray(self.scorer.predict_proba(features)[:, 1], dtype=np.float64)
 
     def type_probabilities(
-        self, features: NDArray[np.float64], weights: NDArray[np.float64]
+        self, features: NDArray[np.float64], weights: NDArray[np.float64], groups: NDArray[np.int64]
     ) -> NDArray[np.float64]:
-        """(C,) class probabilities of a sequence: the tracks' (features (T, F)) probabilities
-        voted with ``weights`` (T,) (their detections). Uniform when nothing to vote on."""
+        """(G, C) class probabilities of ``G = groups.max() + 1`` groups of tracks (a sequence's
+        chain at several instants): the probabilities of the tracks (features (T, F)) of each
+        group voted with ``weights`` (T,) (their detections). Uniform for an empty group."""
         c = len(self.class_ids)
-        if self.typer is None or len(features) == 0 or float(np.sum(weights)) <= 0:
-            return np.full(c, 1.0 / max(c, 1))
-        proba = np.asarray(self.typer.predict_proba(features), dtype=np.float64)
+        n_groups = int(groups.max()) + 1 if len(groups) else 0
+        out = np.full((n_groups, c), 1.0 / max(c, 1))
+        if self.typer is None or len(features) == 0:
+            return out
+        with one_thread():
+            proba = np.asarray(
+                self.typer.predict_proba(features[:, TYPE_COLUMNS]), dtype=np.float64
+            )
         full = np.zeros((len(features), c))
         full[:, np.asarray(self.typer.classes_, dtype=np.int64)] = proba
-        vote = np.asarray(weights, dtype=np.float64) @ full
-        return vote / vote.sum()
+        vote = np.zeros((n_groups, c))
+        np.add.at(vote, groups, full * np.asarray(weights, dtype=np.float64)[:, None])
+        total = vote.sum(axis=1)
+        ok = total > 0
+        out[ok] = vote[ok] / total[ok, None]
+        return out
 
     def to_bytes(self) -> bytes:
         """The model file's contents (see the module docstring)."""
@@ -80,6 +116,7 @@ class LearnedModel:
             "format": MODEL_FORMAT,
             "kind": "cldet-model",
             "feature_names": list(self.feature_names),
+            "type_feature_names": list(TYPE_FEATURES),
             "class_ids": [int(c) for c in self.class_ids],
             "scan_offset_s": float(self.scan_offset_s),
             "bias": {"along_ray_m": float(self.bias_along_ray_m), "z_m": float(self.bias_z_m)},
@@ -118,7 +155,7 @@ def load_model(path: Path | str) -> LearnedModel:
             " train the model again with this version"
         )
     names = tuple(meta.get("feature_names", ()))
-    if names != FEATURE_NAMES:
+    if names != FEATURE_NAMES or tuple(meta.get("type_feature_names", ())) != TYPE_FEATURES:
         missing = sorted(set(FEATURE_NAMES) - set(names))
         extra = sorted(set(names) - set(FEATURE_NAMES))
         raise ModelError(
@@ -142,10 +179,11 @@ def load_model(path: Path | str) -> LearnedModel:
         )
     except Exception as exc:  # skops raises many kinds on a damaged or untrusted payload
         raise ModelError(f"{p}: the model's estimators cannot be read safely ({exc})") from None
-    for est_, what in ((scorer, "scorer"), (typer, "typer")):
-        if est_ is not None and getattr(est_, "n_features_in_", len(FEATURE_NAMES)) != len(
-            FEATURE_NAMES
-        ):
+    for est_, what, n in (
+        (scorer, "scorer", len(FEATURE_NAMES)),
+        (typer, "typer", len(TYPE_FEATURES)),
+    ):
+        if est_ is not None and getattr(est_, "n_features_in_", n) != n:
             raise ModelError(f"{p}: the {what} expects another number of features")
     if typer is not None and len(model.class_ids) < 2:
         raise ModelError(f"{p}: a type classifier with fewer than two class ids")

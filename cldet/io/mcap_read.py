@@ -46,10 +46,10 @@ from numpy.typing import NDArray
 from cldet.errors import CorruptMessageError, LogError
 from cldet.io import topics
 from cldet.io.mcap_append import AppendPlan, copy_prefix, plan_append
-from cldet.io.schemas import ClassLabel
+from cldet.io.schemas import ClassEstimateMessage, ClassLabel
 from cldet.io.schemas import Estimate as EstimateMessage
 from cldet.stamps import NS_PER_S, format_stamp
-from cldet.types import ClassSample, Cloud, Estimate, PositionSample, Source
+from cldet.types import ClassEstimate, ClassSample, Cloud, Estimate, PositionSample, Source
 
 __all__ = [
     "LogReader",
@@ -652,6 +652,20 @@ class LogReader:
             except _CORRUPT as err:
                 raise self.message_error(topic, message, err) from err
             yield ClassSample(stamp_ns=message.log_time, class_id=int(label.class_id))
+
+    def iter_class_estimates(self, topic: str = topics.CLASS_ESTIMATE) -> Iterator[ClassEstimate]:
+        """The drone-type estimates of a ``cldet.ClassEstimate`` topic, in log order."""
+        for message, _ in self._decoded(topic, (topics.SCHEMA_CLASS_ESTIMATE,), None, None):
+            try:
+                msg = ClassEstimateMessage.FromString(message.data)
+            except _CORRUPT as err:
+                raise self.message_error(topic, message, err) from err
+            ids, probs = tuple(int(c) for c in msg.class_ids), tuple(msg.probabilities)
+            if len(ids) != len(probs) or int(msg.class_id) not in ids:
+                raise self.message_error(
+                    topic, message, ValueError("class ids and probabilities do not match")
+                )
+            yield ClassEstimate(message.log_time, int(msg.class_id), ids, probs)
 
     def iter_estimates(
         self,
