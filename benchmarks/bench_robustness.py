@@ -137,7 +137,7 @@ def _estimate(
 ) -> tuple[Any, float, str | None]:
     """Run the estimator; (SequenceEstimate or None, seconds, error text or None)."""
     from cldet.config import load_config
-    from cldet.core.estimator import estimate_sequence
+    from cldet.core.methods import estimate_sequence
 
     config = load_config(Path(config_path) if config_path else None, overrides={"method": method})
     started = time.perf_counter()

@@ -29,8 +29,9 @@ from scipy.spatial.transform import Rotation
 
 from cldet import __version__
 from cldet.config import CldetConfig, FramesConfig, config_to_dict
-from cldet.core.estimator import FrameDetections, SequenceEstimate, make_estimator
+from cldet.core.estimator import FrameDetections, SequenceEstimate
 from cldet.core.frames import pair_frames
+from cldet.core.methods import make_estimator
 from cldet.errors import CldetError, FrameOrderError
 from cldet.io import topics
 from cldet.io.files import check_output, lock_file

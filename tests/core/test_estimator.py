@@ -20,11 +20,10 @@ from cldet.core.estimator import (
     FrameDetections,
     SequenceEstimate,
     TrackEstimator,
-    estimate_sequence,
     fuse_points,
-    make_estimator,
 )
 from cldet.core.frames import pair_frames, valid_points
+from cldet.core.methods import estimate_sequence, make_estimator
 from cldet.errors import FrameOrderError
 from cldet.types import Cluster, LidarFrame, PositionSample, Source
 
