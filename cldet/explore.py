@@ -25,7 +25,7 @@ from cldet.core.background import FOREGROUND, BackgroundModel
 from cldet.core.clustering import cluster_points, summarize_clusters
 from cldet.core.estimator import fuse_points
 from cldet.core.frames import pair_frames, valid_points
-from cldet.core.trajectory import evaluate_trajectory
+from cldet.core.trajectory import evaluate_trajectory, rms, trajectory_errors
 from cldet.results import normalise_sequence, read_truth
 from cldet.stamps import NS_PER_S
 from cldet.types import Estimate, LidarFrame, Source
@@ -581,7 +581,7 @@ class ErrorSeries:
     @property
     def rms_m(self) -> float:
         """RMS 3D error, metres (NaN when empty)."""
-        return float(np.sqrt(np.mean(self.error_m**2))) if len(self.error_m) else float("nan")
+        return rms(self.error_m)
 
 
 def estimate_errors(method: str, estimates: Sequence[Estimate], truth: Truth) -> ErrorSeries:
@@ -597,7 +597,7 @@ def estimate_errors(method: str, estimates: Sequence[Estimate], truth: Truth) ->
     """
     stamps = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
     pos = np.array([e.position for e in estimates], dtype=np.float64).reshape(-1, 3)
-    err = np.linalg.norm(pos - truth_at(truth, stamps), axis=1) if len(stamps) else np.zeros(0)
+    err = trajectory_errors(stamps, pos, truth.stamps_ns, truth.positions)
     t0 = stamps[0] if len(stamps) else 0
     return ErrorSeries(
         method=method,
@@ -618,10 +618,7 @@ def error_by_source(series: ErrorSeries) -> dict[str, tuple[int, float]]:
     for source in Source:
         sel = series.source == int(source)
         if sel.any():
-            out[source.name.lower()] = (
-                int(sel.sum()),
-                float(np.sqrt(np.mean(series.error_m[sel] ** 2))),
-            )
+            out[source.name.lower()] = (int(sel.sum()), rms(series.error_m[sel]))
     return out
 
 
