@@ -11,7 +11,6 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 
 from cldet.config import CldetConfig
-from cldet.core.cldet_baseline import ClDetEstimator
 from cldet.core.estimator import Estimator, FrameDetections, SequenceEstimate, TrackEstimator
 from cldet.core.model import LearnedModel
 from cldet.types import LidarFrame
@@ -24,6 +23,8 @@ def make_estimator(config: CldetConfig, model: LearnedModel | None = None) -> Es
     if config.method == "track":
         return TrackEstimator(config, model)
     if config.method == "cl-det":
+        from cldet.core.cldet_baseline import ClDetEstimator  # scikit-learn: cl-det only
+
         return ClDetEstimator(config)
     raise ValueError(f"unknown method {config.method!r}")  # unreachable: validated by config
 
