@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import statistics
 import tempfile
 import time
@@ -31,16 +30,6 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-
-
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def _median_s(fn: Callable[[], object], repeat: int) -> float:
@@ -208,7 +197,9 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="smaller sizes (a smoke test)")
     parser.add_argument("--repeat", type=int, default=7, help="timed runs per figure (median)")
     args = parser.parse_args()
-    print(f"{_cpu_model()}, {os.cpu_count()} cores (one used), numpy {np.__version__}")
+    from machine import cpu_model  # benchmarks/machine.py (the script's folder is on the path)
+
+    print(f"{cpu_model()}, {os.cpu_count()} cores (one used), numpy {np.__version__}")
     sizes = [300, 3000] if args.quick else [300, 3000, 20000]
     bench_clustering(sizes, args.repeat)
     if args.quick:
