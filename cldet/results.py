@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from cldet.errors import CldetError, LogError, OutputExistsError, ResultsError
+from cldet.errors import CldetError, LogError, ResultsError
 from cldet.io import topics
 from cldet.io.files import atomic_path, resolve_link
 from cldet.io.mcap_read import open_log
@@ -381,8 +381,9 @@ def read_log_truth(path: Path | str) -> list[TruthRow]:
 def write_atomic(path: Path | str, write: Callable[[Path], None], *, overwrite: bool) -> None:
     """Create ``path`` through a temporary file in the same folder, renamed into place at the end.
 
-    A crash or error never leaves a partial file and never damages an existing one; see
-    :func:`cldet.io.files.atomic_path` (mode from the umask, fsync, stale temporaries removed).
+    :func:`cldet.io.files.atomic_path` for a ``write(tmp)`` callback, with the CSV layer's errors:
+    a crash or error never leaves a partial file and never damages an existing one (mode from
+    the umask, fsync, stale temporaries removed).
 
     Args:
         path: the output file; its folder must exist.
@@ -394,10 +395,6 @@ def write_atomic(path: Path | str, write: Callable[[Path], None], *, overwrite: 
         ResultsError: the folder is missing or not writable.
     """
     target = Path(path)
-    if target.exists() and not overwrite:
-        raise OutputExistsError(
-            f"{target} already exists: pass overwrite (--overwrite) to replace it"
-        )
     if not resolve_link(target).parent.is_dir():
         raise ResultsError(f"{target}: the folder {target.parent} does not exist")
     try:
