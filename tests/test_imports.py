@@ -1,8 +1,8 @@
 """Imports point one way: every module of cldet and converters is read (ast) and checked.
 
 ``commands -> demo -> pipeline/export/evaluate/calibrate/explore -> {view, simulate, converters}
--> {io, core} -> base``, where a layer may import its own and every lower layer, never a higher
-one; the steps (pipeline, export, evaluate, calibrate, explore) never import each other; the core
+-> {io, core} -> base``: a layer imports itself and the layers :data:`LAYERS` lists for it, never
+a higher one (converters: only io and base); the steps (pipeline, export, evaluate, calibrate, explore) never import each other; the core
 imports no file format, viewer or CLI library; and no module imports one that imports it back.
 Imports inside functions and under ``TYPE_CHECKING`` count: they are dependencies all the same.
 """
