@@ -137,7 +137,7 @@ class Job:
 
 @functools.cache
 def _model(path: str) -> Any:
-    from cldet.core.model import load_model
+    from cldet.modelfile import load_model
 
     return load_model(path)
 
@@ -150,7 +150,7 @@ def _estimate(
 ) -> tuple[Any, float, str | None]:
     """Run the estimator; (SequenceEstimate or None, seconds, error text or None)."""
     from cldet.config import load_config
-    from cldet.core.estimator import estimate_sequence
+    from cldet.core.methods import estimate_sequence
 
     config = load_config(Path(config_path) if config_path else None, overrides={"method": method})
     model = _model(model_path) if model_path else None

@@ -27,9 +27,9 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from cldet.core.model import load_model
 from cldet.evaluate import evaluate_results, truth_from_logs
 from cldet.export import export_results
+from cldet.modelfile import load_model
 from cldet.pipeline import annotate_logs
 from cldet.simulate.dataset import simulate_sequence
 from cldet.train import train_logs

@@ -29,6 +29,7 @@ from cldet.results import (
     RowKey,
     TruthRow,
     TruthTable,
+    read_log_truth,
     read_results,
     write_atomic,
 )
@@ -371,8 +372,6 @@ def truth_from_logs(logs: Iterable[Path | str], progress: Progress | None = None
         LogError: a log cannot be read, has no sequence name or no ground truth.
         ResultsError: two logs hold the same sequence and stamp.
     """
-    from cldet.export import read_log_truth
-
     rows: list[TruthRow] = []
     seen: dict[RowKey, str] = {}
     paths = [Path(p) for p in logs]

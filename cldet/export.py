@@ -35,17 +35,16 @@ from cldet.config import TRAINING_MEAN_POSITION_M
 from cldet.core.trajectory import evaluate_trajectory
 from cldet.errors import LogError, OutputExistsError, ResultsError
 from cldet.io import topics
-from cldet.io.mcap_read import LogReader, open_log
+from cldet.io.mcap_read import open_log
 from cldet.progress import NullProgress, Progress
 from cldet.results import (
     QueryRow,
     ResultRow,
-    TruthRow,
     normalise_sequence,
+    read_log_truth,
     read_timestamps,
     write_results,
 )
-from cldet.stamps import format_stamp
 from cldet.types import Source
 
 FALLBACK_POSITION_M: Final[tuple[float, float, float]] = TRAINING_MEAN_POSITION_M
@@ -96,18 +95,6 @@ class ExportReport:
         )
 
 
-def _source_metadata(log: LogReader) -> tuple[str, str]:
-    """(sequence, split) from the log's ``cldet.source`` metadata."""
-    source = log.metadata().get(topics.METADATA_SOURCE, {})
-    sequence = source.get("sequence", "").strip()
-    if not sequence:
-        raise LogError(
-            f"{log.path}: no sequence name in its {topics.METADATA_SOURCE!r} metadata: "
-            "expected a log written by `cldet convert` (and `cldet annotate`)"
-        )
-    return sequence, source.get("split", "").strip()
-
-
 def read_log_track(path: Path | str) -> LogTrack:
     """Read a log's sequence name and estimated trajectory (``/cldet/estimate``).
 
@@ -118,7 +105,7 @@ def read_log_track(path: Path | str) -> LogTrack:
         LogError: the log cannot be read, or has no sequence name in its metadata.
     """
     with open_log(path) as log:
-        sequence, split = _source_metadata(log)
+        sequence, split = log.source()
         stamps: list[int] = []
         positions: list[NDArray[np.float64]] = []
         fallback: list[bool] = []
@@ -144,41 +131,6 @@ def read_log_track(path: Path | str) -> LogTrack:
     return LogTrack(
         Path(path), sequence, split, stamps_ns[order], pos[order], n_dropped, annotated, class_id
     )
-
-
-def read_log_truth(path: Path | str) -> list[TruthRow]:
-    """The ground-truth rows of one log: ``/ground_truth`` positions, with ``/class`` if present.
-
-    Each row's class is the label at or before its stamp (the first label for earlier stamps);
-    ``None`` when the log has no ``/class`` channel. Timestamps are formatted with 6 decimals.
-
-    Raises:
-        LogError: the log cannot be read, has no sequence name or no ``/ground_truth`` messages.
-    """
-    with open_log(path) as log:
-        sequence, _split = _source_metadata(log)
-        counts = log.list_topics()
-        if counts.get(topics.GROUND_TRUTH, 0) == 0:
-            listing = ", ".join(f"{t} ({n})" for t, n in counts.items()) or "none"
-            raise LogError(
-                f"{log.path}: no {topics.GROUND_TRUTH} messages (sequence {sequence}); "
-                f"topics in the file: {listing}"
-            )
-        truth = list(log.iter_positions(topics.GROUND_TRUTH))
-        labels = list(log.iter_classes(topics.CLASS)) if counts.get(topics.CLASS, 0) > 0 else []
-    label_ns = np.array([c.stamp_ns for c in labels], dtype=np.int64)
-    label_id = [c.class_id for c in labels]
-    rows = []
-    for sample in truth:
-        class_id = None
-        if label_id:
-            i = int(np.searchsorted(label_ns, sample.stamp_ns, side="right")) - 1
-            class_id = label_id[max(i, 0)]
-        x, y, z = (float(v) for v in sample.position)
-        rows.append(
-            TruthRow(sequence, format_stamp(sample.stamp_ns), sample.stamp_ns, (x, y, z), class_id)
-        )
-    return rows
 
 
 def export_results(

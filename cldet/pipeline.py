@@ -29,9 +29,11 @@ from scipy.spatial.transform import Rotation
 
 from cldet import __version__
 from cldet.config import CldetConfig, FramesConfig, config_to_dict
-from cldet.core.estimator import FrameDetections, SequenceEstimate, make_estimator
+from cldet.core.estimator import FrameDetections, SequenceEstimate
 from cldet.core.frames import pair_frames
+from cldet.core.methods import make_estimator
 from cldet.core.model import LearnedModel
+from cldet.core.trajectory import rms, trajectory_errors
 from cldet.errors import CldetError, FrameOrderError
 from cldet.io import topics
 from cldet.io.files import check_output, lock_file
@@ -197,13 +199,13 @@ def annotate_log(
         result = estimator.refine()
         view.log_result(result, detections)
         truths = list(iter_log_positions(log, sensors.truth)) if sensors.truth else []
-        rms = None
+        rms_m: float | None = None
         if truths:
             truth_ns = np.array([t.stamp_ns for t in truths], dtype=np.int64)
             truth_xyz = np.array([t.position for t in truths], dtype=np.float64)
             errors = _truth_errors(result.estimates, truth_ns, truth_xyz)
             view.log_truth(truth_ns, truth_xyz, errors)
-            rms = None if errors is None else float(np.sqrt(np.mean(errors**2)))
+            rms_m = None if errors is None else rms(errors)
         metadata = {
             METADATA_ANNOTATE: {
                 "method": config.method,
@@ -239,7 +241,7 @@ def annotate_log(
         frames=len(detections),
         sources=sources,
         seconds=time.perf_counter() - started,
-        rms_error_m=rms,
+        rms_error_m=rms_m,
     )
 
 
@@ -247,13 +249,11 @@ def _truth_errors(
     estimates: Sequence[Estimate], truth_ns: np.ndarray, truth_xyz: np.ndarray
 ) -> np.ndarray | None:
     """(K,) 3D distance, metres, of the estimated trajectory to the truth at its K stamps."""
-    from cldet.core.trajectory import evaluate_trajectory
-
     if not estimates:
         return None
     stamps = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
     positions = np.array([e.position for e in estimates], dtype=np.float64)
-    return np.linalg.norm(evaluate_trajectory(stamps, positions, truth_ns) - truth_xyz, axis=1)
+    return trajectory_errors(truth_ns, truth_xyz, stamps, positions)
 
 
 def result_additions(

@@ -41,12 +41,13 @@ from cldet.core.estimator import Candidates, TrackEstimator, refine_candidates
 from cldet.core.features import FEATURE_NAMES, TYPE_COLUMNS, track_detections, track_features
 from cldet.core.model import LearnedModel, one_thread
 from cldet.core.trajectory import evaluate_trajectory
-from cldet.errors import CldetError
+from cldet.errors import CldetError, OutputExistsError
 from cldet.evaluate import confusion_text
 from cldet.io import topics
-from cldet.io.files import atomic_output
+from cldet.io.files import check_output
 from cldet.io.mcap_read import open_log
 from cldet.io.sources import iter_log_positions, select_topics
+from cldet.modelfile import write_model
 from cldet.pipeline import read_frames
 from cldet.progress import NullProgress, Progress
 from cldet.stamps import NS_PER_S
@@ -483,6 +484,9 @@ def train_logs(
         warn("the configuration's bias is ignored: training fits it from the truth")
     if not logs:
         raise TrainError("no training logs given")
+    check_output(out, "model")  # fail before the work, not after
+    if Path(out).exists() and not overwrite:
+        raise OutputExistsError(f"{out} already exists: pass overwrite (--overwrite) to replace it")
     make = progress_factory or NullProgress
     samples = []
     for log in logs:
@@ -508,7 +512,5 @@ def train_logs(
     )
     if cross_validation and len(samples) < 3:
         warn("cross-validation needs three logs or more: skipped")
-    data = model.to_bytes()
-    with atomic_output(out, overwrite=overwrite) as f:
-        f.write(data)
+    write_model(model, out, overwrite=overwrite)
     return TrainReport(model, folds, time.perf_counter() - started)

@@ -125,8 +125,8 @@ def annotate(
     Example: cldet annotate logs/val/*.mcap --method track
     """
     from cldet.config import load_config
-    from cldet.core.model import load_model
     from cldet.errors import CldetError
+    from cldet.modelfile import load_model
     from cldet.pipeline import annotate_log_locked, annotate_logs
     from cldet.progress import BarProgress
 

@@ -45,7 +45,7 @@ FALLBACK (no track at all). ``sigma_m`` is the per-axis 1-sigma position uncerta
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Protocol
 
@@ -87,9 +87,7 @@ __all__ = [
     "SequenceEstimate",
     "TrackEstimator",
     "TrackEvent",
-    "estimate_sequence",
     "fuse_points",
-    "make_estimator",
 ]
 
 _LOST_AFTER_S = 0.5  # a gap without detection longer than this is reported as lost/reacquired
@@ -734,32 +732,3 @@ def _gap_events(
             )
         )
     return out
-
-
-def make_estimator(config: CldetConfig, model: LearnedModel | None = None) -> Estimator:
-    """The estimator the configuration's ``method`` names (``model``: ``track`` only)."""
-    if config.method == "track":
-        return TrackEstimator(config, model)
-    if config.method == "cl-det":
-        from cldet.core.cldet_baseline import ClDetEstimator
-
-        return ClDetEstimator(config)
-    raise ValueError(f"unknown method {config.method!r}")  # unreachable: validated by config
-
-
-def estimate_sequence(
-    frames: Callable[[], Iterable[LidarFrame]] | Iterable[LidarFrame],
-    config: CldetConfig,
-    model: LearnedModel | None = None,
-) -> tuple[list[FrameDetections], SequenceEstimate]:
-    """Register every frame of a sequence (one pass, in stamp order), then refine.
-
-    ``frames`` is an iterable of frames, or a callable returning one (called once). With a
-    ``model`` (``cldet train``) its offset and bias replace the configuration's.
-    """
-    if model is not None:
-        config = model.configure(config)
-    estimator = make_estimator(config, model)
-    source = frames() if callable(frames) else frames
-    detections = [estimator.register_frame(frame) for frame in source]
-    return detections, estimator.refine()
