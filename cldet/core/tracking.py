@@ -33,6 +33,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from cldet.config import TrackingConfig
+from cldet.core.smoothing import process_noise
 from cldet.types import Cluster
 
 __all__ = [
@@ -222,7 +223,7 @@ class CandidateTracker:
         if self._t is not None and len(self._ids):
             dt = t_s - self._t
             F = np.array([[1.0, dt], [0.0, 1.0]])
-            Q = cfg.accel_psd * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
+            Q = process_noise(dt, cfg.accel_psd)
             self._x = self._x @ F.T
             self._P = F @ self._P @ F.T + Q
             keep = t_s - self._last_t <= cfg.max_miss_s
