@@ -68,6 +68,12 @@ __all__ = [
     "select_chain",
 ]
 
+LEARNED_FLOOR = 0.3
+"""A learned scorer re-weighs a track's hand-set factors by ``LEARNED_FLOOR + (1 -
+LEARNED_FLOOR) p``: at most ~3x, never to nothing. Its probability is calibrated on the logs it
+was trained on; on another site's it is over-confident, and letting it veto tracks outright
+(floor 0) raised the failure rate on 60 randomised development worlds (29 against 24 of 60, a
+model trained on 24 sequences of the default simulator) where 0.3 did not (24 of 60, lower MSE)."""
 _LINK_COST = 2.0
 _NIS95 = 7.81  # 95 % point of chi^2 with 3 degrees of freedom
 _JITTER_M = 2.0  # a track scattered less than this that goes nowhere is static clutter
@@ -157,9 +163,9 @@ def score_tracks(
     """Score every candidate track of two detections or more (see the module docstring).
 
     With a learned ``scorer`` the hand-set track factors (speed, static, fixed, sensors) are
-    multiplied by its probability that the track is the drone: the physics stays the prior,
-    what was learned from labelled logs re-weighs it (on 24 development sequences, using the
-    probability alone gave the same chains).
+    re-weighed by its probability ``p`` that the track is the drone, by
+    ``LEARNED_FLOOR + (1 - LEARNED_FLOOR) p``: the physics stays the prior, what was learned from
+    labelled logs re-weighs it within bounds.
     """
     kept: list[tuple[TrackRecord, TrackDetections, NDArray[np.float64]]] = []
     for rec in records:
@@ -171,7 +177,8 @@ def score_tracks(
     factors = np.array([_hand_factor(r, d, times_s, cfg) for r, d, _ in kept])
     if scorer is not None and kept:
         feats = np.array([track_features(r, d, times_s[r.frames]) for r, d, _ in kept])
-        factors = factors * np.asarray(scorer(feats), dtype=np.float64)
+        p = np.asarray(scorer(feats), dtype=np.float64)
+        factors = factors * (LEARNED_FLOOR + (1.0 - LEARNED_FLOOR) * p)
     out = []
     for (rec, _, per_det), factor in zip(kept, factors, strict=True):
         contribution = per_det * float(factor)
