@@ -14,6 +14,7 @@ small foreground.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import multiprocessing.context
 import os
@@ -24,29 +25,34 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from cldet import __version__
-from cldet.config import CldetConfig, FramesConfig, config_to_dict
+from cldet.config import CldetConfig, FramesConfig, SensorConfig, config_to_dict
 from cldet.core.estimator import FrameDetections, SequenceEstimate, make_estimator
 from cldet.core.frames import pair_frames
 from cldet.errors import CldetError, FrameOrderError
 from cldet.io import topics
 from cldet.io.files import check_output, lock_file
-from cldet.io.mcap_read import open_log
+from cldet.io.mcap_append import is_replaced_channel
+from cldet.io.mcap_read import LogReader, open_log
 from cldet.io.mcap_write import LogWriter
 from cldet.io.rewrite import Addition, rewrite_log
+from cldet.io.ros import FrameTransform
 from cldet.io.sources import (
     SensorTopics,
     iter_log_clouds,
     iter_log_positions,
     select_topics,
 )
+from cldet.io.transforms import log_tree
+from cldet.live import LiveOutput
 from cldet.progress import NullProgress, Progress
 from cldet.signals import init_worker, stop_workers
 from cldet.types import Cloud, Estimate, LidarFrame, Source
-from cldet.view import NullView, RerunView, View
+from cldet.view import NullView, RerunView, TeeView, View
 
 METADATA_ANNOTATE = topics.METADATA_CONFIG
 
@@ -93,9 +99,15 @@ def _avia_extrinsic(cfg: FramesConfig) -> NDArray[np.float64] | None:
     return matrix
 
 
-def _frames(log: Path, sensors: SensorTopics, cfg: FramesConfig) -> Iterator[LidarFrame]:
-    """The LiDAR's frames paired with the Avia's, both streamed (one pass over each topic)."""
-    lidar_frame: list[str] = []  # the LiDAR's frame id, from its first cloud
+def _frames(
+    log: Path, sensors: SensorTopics, cfg: FramesConfig, lidar_frame: list[str] | None = None
+) -> Iterator[LidarFrame]:
+    """The LiDAR's frames paired with the Avia's, both streamed (one pass over each topic).
+
+    ``lidar_frame`` receives the LiDAR's frame id from its first cloud.
+    """
+    if lidar_frame is None:
+        lidar_frame = []
     extrinsic = _avia_extrinsic(cfg)
 
     def lidar() -> Iterator[Cloud]:
@@ -126,6 +138,7 @@ def annotate_log(
     lidar: str | None = None,
     avia: str | None = None,
     truth: str | None = None,
+    live: LiveOutput | None = None,
 ) -> AnnotateReport:
     """Estimate the drone's position at every Mid-360 frame of ``log`` and write the results back.
 
@@ -146,6 +159,9 @@ def annotate_log(
             with ``/lidar_360``, else none).
         truth: a ground-truth position topic for the reported error (default:
             ``/ground_truth`` when present).
+        live: stream each frame as it is processed (and the refined track at the end) to a
+            Rerun viewer and/or a Foxglove server (:mod:`cldet.live`), paced at the sensor's
+            rate when it says so; the outputs are written as without it.
 
     Returns:
         An :class:`AnnotateReport`.
@@ -167,23 +183,46 @@ def annotate_log(
         found = reader.list_topics()
         source_meta = reader.metadata().get(topics.METADATA_SOURCE, {})
         sensors = select_topics(reader, lidar, avia, truth)
+        tree = _existing_tree(reader)
+        first_ns = reader.time_range()[0]
     n_frames = found[sensors.lidar]
     sequence = source_meta.get("sequence", log.stem)
+    split = source_meta.get("split", "")
 
     view: View = NullView()
-    rrd_path: Path | None = None
-    if write_rrd:
+    live_rerun = live.rerun if live is not None else None
+    if write_rrd or live_rerun is not None:
         rrd_path = Path(rrd) if rrd is not None else output.with_suffix(".rrd")
-        view = RerunView(rrd_path, recording_name=f"cldet {sequence}")
+        view = RerunView(
+            rrd_path if write_rrd else None,
+            recording_name=f"cldet {split + '/' if split else ''}{sequence}",
+            application_id=review_application_id(log, split, sequence),
+            sensor=config.sensor,
+            max_range_m=config.frames.max_range_m,
+            live=live_rerun,
+        )
+    foxglove_view = (
+        live.foxglove_view(config.sensor, _lidar_frame_id(log, sensors.lidar))
+        if live is not None
+        else None
+    )
+    if foxglove_view is not None:
+        view = TeeView(view, foxglove_view)
     try:
         estimator = make_estimator(config)
         progress.start(n_frames, f"{sequence}: tracking")
         detections: list[FrameDetections] = []
+        lidar_frame: list[str] = []
         try:
-            for frame in _frames(log, sensors, config.frames):
+            for frame in _frames(log, sensors, config.frames, lidar_frame):
+                if live is not None:
+                    live.pace(frame.stamp_ns)
+                in_hand = time.perf_counter()
                 found_here = estimator.register_frame(frame)
                 detections.append(found_here)
                 view.log_frame(frame, found_here)
+                if live is not None:
+                    live.frame_done(frame.stamp_ns, time.perf_counter() - in_hand)
                 progress.advance()
         except FrameOrderError as err:
             raise FrameOrderError(f"{log}: {err}") from err
@@ -191,12 +230,17 @@ def annotate_log(
         view.log_result(result, detections)
         truths = list(iter_log_positions(log, sensors.truth)) if sensors.truth else []
         rms = None
+        truth_xyz: NDArray[np.float64] | None = None
         if truths:
             truth_ns = np.array([t.stamp_ns for t in truths], dtype=np.int64)
             truth_xyz = np.array([t.position for t in truths], dtype=np.float64)
             errors = _truth_errors(result.estimates, truth_ns, truth_xyz)
-            view.log_truth(truth_ns, truth_xyz, errors)
+            view.log_truth(truth_ns, truth_xyz, errors, _estimates_at(result.estimates, truth_ns))
             rms = None if errors is None else float(np.sqrt(np.mean(errors**2)))
+        frame_id = lidar_frame[0] if lidar_frame else topics.FRAME_MID360
+        additions = result_additions(result, detections, frame_id=frame_id, truth=truth_xyz)
+        if tree is None:  # a log without a frame tree gets one (replaced by the next run)
+            additions.append((first_ns, _tree_writer(found, frame_id, config.sensor, first_ns)))
         metadata = {
             METADATA_ANNOTATE: {
                 "method": config.method,
@@ -212,7 +256,7 @@ def annotate_log(
         rewrite_log(
             log,
             output,
-            result_additions(result, detections),
+            additions,
             metadata=metadata,
             replace_metadata=(METADATA_ANNOTATE,),
         )
@@ -248,10 +292,90 @@ def _truth_errors(
     return np.linalg.norm(evaluate_trajectory(stamps, positions, truth_ns) - truth_xyz, axis=1)
 
 
+def review_application_id(log: Path, split: str, sequence: str) -> str:
+    """The Rerun application id of a log's review recording: one per log, so that the viewer
+    keeps a blueprint per log (not one shared by every ``seq0001`` of every split)."""
+    digest = hashlib.sha1(str(Path(log).resolve()).encode()).hexdigest()[:8]
+    return "-".join(p for p in ("cldet", split, sequence, digest) if p)
+
+
+def _estimates_at(
+    estimates: Sequence[Estimate], stamps_ns: NDArray[np.int64]
+) -> NDArray[np.float64] | None:
+    """(K, 3) the estimated trajectory at ``stamps_ns`` (None without estimates)."""
+    from cldet.core.trajectory import evaluate_trajectory
+
+    if not estimates:
+        return None
+    stamps = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
+    positions = np.array([e.position for e in estimates], dtype=np.float64)
+    return np.asarray(evaluate_trajectory(stamps, positions, stamps_ns), dtype=np.float64)
+
+
+def _lidar_frame_id(log: Path, topic: str) -> str:
+    """The frame id of the LiDAR's first cloud (the Mid-360's when the topic is empty)."""
+    for cloud in iter_log_clouds(log, topic):
+        return cloud.frame_id or topics.FRAME_MID360
+    return topics.FRAME_MID360
+
+
+def _existing_tree(reader: LogReader) -> list[FrameTransform] | None:
+    """The log's own static frame tree (``foxglove.FrameTransforms`` on a channel that is not a
+    result of an earlier run), None when it has none."""
+    tf_topics = [
+        t for t, kind in reader.topic_types().items() if kind == topics.SCHEMA_FRAME_TRANSFORMS
+    ]
+    if not tf_topics:
+        return None
+    out: list[FrameTransform] = []
+    for _, channel, message in reader.iter_messages(tf_topics):
+        if is_replaced_channel(channel, "/cldet/"):
+            continue
+        for t in FrameTransforms.FromString(message.data).transforms:
+            out.append(FrameTransform(t.parent_frame_id, t.child_frame_id, np.eye(4)))
+    return out or None
+
+
+def _tree_writer(
+    found: dict[str, int], lidar_frame: str, sensor: SensorConfig, stamp_ns: int
+) -> Addition:
+    """Writes the frame tree of a log that has none, on ``/tf`` (``/cldet/tf`` when the log's
+    ``/tf`` is taken, e.g. by ROS transforms), marked as a result."""
+    topic = topics.TF if topics.TF not in found else "/cldet/tf"
+    tree = log_tree(lidar_frame, sensor)
+
+    def write(writer: LogWriter) -> None:
+        writer.write_transforms(
+            topic, stamp_ns, tree, channel_metadata={topics.RESULT_CHANNEL_KEY: "annotate"}
+        )
+
+    return write
+
+
+_SOURCE_RGBA: dict[Source, tuple[int, int, int, int]] = {
+    Source.DETECTED: (40, 220, 60, 255),
+    Source.PREDICTED: (255, 170, 0, 255),
+    Source.SMOOTHED: (80, 200, 255, 255),
+    Source.FALLBACK: (255, 40, 40, 255),
+}
+_TRACK_RGBA = (255, 60, 200, 255)
+_TRUTH_RGBA = (255, 255, 255, 255)
+_CHOSEN_RGBA = (40, 220, 60, 255)
+_CLUSTER_RGBA = (255, 150, 0, 255)
+
+
 def result_additions(
-    result: SequenceEstimate, detections: Sequence[FrameDetections]
+    result: SequenceEstimate,
+    detections: Sequence[FrameDetections],
+    *,
+    frame_id: str = topics.FRAME_MID360,
+    truth: NDArray[np.float64] | None = None,
 ) -> list[tuple[int, Addition]]:
     """The ``/cldet/*`` messages of one annotate run, as ``(log_time_ns, write)`` pairs.
+
+    All in ``frame_id`` (the LiDAR's frame). Foxglove draws every one of them; Rerun's MCAP
+    import draws the point clouds (``/cldet/drone``, ``/cldet/track``, ``/cldet/truth_track``,
+    ``/cldet/centroids``, ``/cldet/foreground``), not the poses or the scene update.
 
     - ``/cldet/estimate`` (cldet.Estimate) and ``/cldet/pose`` (foxglove.PoseInFrame)
       per estimate of the refined track;
@@ -261,32 +385,78 @@ def result_additions(
       first frame's stamp, so a viewer shows it for the whole playback;
     - ``/cldet/clusters`` (foxglove.SceneUpdate) per frame: a box and label per cluster, the
       chosen one as a separate green ``drone`` entity;
-    - ``/cldet/foreground`` (foxglove.PointCloud x, y, z, cluster_id) per frame.
+    - ``/cldet/foreground`` (foxglove.PointCloud x, y, z, cluster_id) per frame;
+    - ``/cldet/drone`` (the estimate, coloured by source) and ``/cldet/centroids`` (cluster
+      centres, the chosen one green) per frame, ``/cldet/track`` (the refined track, magenta)
+      and ``/cldet/truth_track`` (``truth``, (K, 3) metres, white) once at the first stamp:
+      coloured point clouds, which Rerun draws too.
     """
-    frame_id = topics.FRAME_MID360
     additions: list[tuple[int, Addition]] = []
     for est in result.estimates:
-        additions.append((est.stamp_ns, _estimate_writer(est)))
+        additions.append((est.stamp_ns, _estimate_writer(est, frame_id)))
     for est in result.causal:
         additions.append((est.stamp_ns, _causal_writer(est)))
     if result.estimates:
         first = result.estimates[0].stamp_ns
         positions = np.array([e.position for e in result.estimates], dtype=np.float64)
-        additions.append(
-            (first, lambda w: w.write_poses(topics.TRAJECTORY, first, positions, frame_id))
-        )
+        additions.append((first, track_writer(first, positions, frame_id)))
+        if truth is not None and len(truth):
+            truth_xyz = np.asarray(truth, dtype=np.float64)
+            additions.append(
+                (
+                    first,
+                    lambda w: w.write_colored_cloud(
+                        topics.TRUTH_TRACK, first, truth_xyz, _TRUTH_RGBA, frame_id
+                    ),
+                )
+            )
     for det in detections:
         chosen_id = result.chosen.get(det.stamp_ns)
-        additions.append((det.stamp_ns, _clusters_writer(det, chosen_id)))
+        additions.append((det.stamp_ns, _clusters_writer(det, chosen_id, frame_id)))
     return additions
 
 
-def _estimate_writer(est: Estimate) -> Addition:
+def track_writer(stamp_ns: int, positions: NDArray[np.float64], frame_id: str) -> Addition:
+    """Writes the refined track: ``/cldet/trajectory`` (poses) and ``/cldet/track`` (cloud)."""
+
     def write(writer: LogWriter) -> None:
-        writer.write_estimate(topics.ESTIMATE, est.stamp_ns, est)
-        writer.write_pose(topics.POSE, est.stamp_ns, est.position, topics.FRAME_MID360)
+        writer.write_poses(topics.TRAJECTORY, stamp_ns, positions, frame_id)
+        writer.write_colored_cloud(topics.TRACK, stamp_ns, positions, _TRACK_RGBA, frame_id)
 
     return write
+
+
+def _estimate_writer(est: Estimate, frame_id: str) -> Addition:
+    def write(writer: LogWriter) -> None:
+        writer.write_estimate(topics.ESTIMATE, est.stamp_ns, est)
+        writer.write_pose(topics.POSE, est.stamp_ns, est.position, frame_id)
+        writer.write_colored_cloud(
+            topics.DRONE, est.stamp_ns, est.position[None, :], _SOURCE_RGBA[est.source], frame_id
+        )
+
+    return write
+
+
+def causal_additions(det: FrameDetections, frame_id: str) -> list[tuple[int, Addition]]:
+    """What a live view shows of one frame as it is processed: its foreground, cluster centres
+    and boxes, and the causal estimate (``/cldet/causal``, ``/cldet/drone``, ``/cldet/pose``)."""
+    additions = [(det.stamp_ns, _clusters_writer(det, None, frame_id))]
+    est = det.estimate
+    if est is not None:
+
+        def write(writer: LogWriter) -> None:
+            writer.write_estimate(topics.CAUSAL, est.stamp_ns, est)
+            writer.write_pose(topics.POSE, est.stamp_ns, est.position, frame_id)
+            writer.write_colored_cloud(
+                topics.DRONE,
+                est.stamp_ns,
+                est.position[None, :],
+                _SOURCE_RGBA[est.source],
+                frame_id,
+            )
+
+        additions.append((det.stamp_ns, write))
+    return additions
 
 
 def _causal_writer(est: Estimate) -> Addition:
@@ -296,24 +466,29 @@ def _causal_writer(est: Estimate) -> Addition:
     return write
 
 
-def _clusters_writer(det: FrameDetections, chosen_id: int | None) -> Addition:
+def _clusters_writer(det: FrameDetections, chosen_id: int | None, frame_id: str) -> Addition:
     def write(writer: LogWriter) -> None:
         cloud = np.column_stack([det.foreground, det.labels.astype(np.float32)])
         writer.write_cloud(
             topics.FOREGROUND,
             det.stamp_ns,
             cloud,
-            topics.FRAME_MID360,
+            frame_id,
             fields=("x", "y", "z", "cluster_id"),
         )
         others = [c for c in det.clusters if c.cluster_id != chosen_id]
-        writer.write_scene_update(topics.CLUSTERS, det.stamp_ns, others, topics.FRAME_MID360)
+        writer.write_scene_update(topics.CLUSTERS, det.stamp_ns, others, frame_id)
         chosen = [c for c in det.clusters if c.cluster_id == chosen_id]
+        centres = np.array([c.centroid for c in others + chosen], dtype=np.float64).reshape(-1, 3)
+        colours = np.array([_CLUSTER_RGBA] * len(others) + [_CHOSEN_RGBA] * len(chosen), np.uint8)
+        writer.write_colored_cloud(
+            topics.CENTROIDS, det.stamp_ns, centres, colours.reshape(-1, 4), frame_id
+        )
         writer.write_scene_update(
             topics.CLUSTERS,
             det.stamp_ns,
             chosen,
-            topics.FRAME_MID360,
+            frame_id,
             labels=[f"drone ({c.n_points} pts)" for c in chosen],
             color=(0.1, 0.9, 0.2, 0.8),
             entity_id="drone",
@@ -334,6 +509,7 @@ def annotate_log_locked(
     lidar: str | None = None,
     avia: str | None = None,
     truth: str | None = None,
+    live: LiveOutput | None = None,
 ) -> AnnotateReport:
     """:func:`annotate_log` while holding an exclusive lock on the log (a second run refuses).
 
@@ -357,6 +533,7 @@ def annotate_log_locked(
             lidar=lidar,
             avia=avia,
             truth=truth,
+            live=live,
         )
 
 
