@@ -183,7 +183,7 @@ def annotate_log(
         found = reader.list_topics()
         source_meta = reader.metadata().get(topics.METADATA_SOURCE, {})
         sensors = select_topics(reader, lidar, avia, truth)
-        tree = _existing_tree(reader)
+        tree, tf_taken = _existing_tree(reader)
         first_ns = reader.time_range()[0]
     n_frames = found[sensors.lidar]
     sequence = source_meta.get("sequence", log.stem)
@@ -240,7 +240,7 @@ def annotate_log(
         frame_id = lidar_frame[0] if lidar_frame else topics.FRAME_MID360
         additions = result_additions(result, detections, frame_id=frame_id, truth=truth_xyz)
         if tree is None:  # a log without a frame tree gets one (replaced by the next run)
-            additions.append((first_ns, _tree_writer(found, frame_id, config.sensor, first_ns)))
+            additions.append((first_ns, _tree_writer(tf_taken, frame_id, config.sensor, first_ns)))
         metadata = {
             METADATA_ANNOTATE: {
                 "method": config.method,
@@ -319,29 +319,35 @@ def _lidar_frame_id(log: Path, topic: str) -> str:
     return topics.FRAME_MID360
 
 
-def _existing_tree(reader: LogReader) -> list[FrameTransform] | None:
-    """The log's own static frame tree (``foxglove.FrameTransforms`` on a channel that is not a
-    result of an earlier run), None when it has none."""
-    tf_topics = [
-        t for t, kind in reader.topic_types().items() if kind == topics.SCHEMA_FRAME_TRANSFORMS
-    ]
-    if not tf_topics:
-        return None
+def _existing_tree(reader: LogReader) -> tuple[list[FrameTransform] | None, bool]:
+    """The log's own static frame tree (``foxglove.FrameTransforms`` on channels that are not
+    results of an earlier run; None without one), and whether its ``/tf`` topic is taken by
+    such a channel (e.g. ROS transforms)."""
+    kinds = reader.topic_types()
+    wanted = [t for t, kind in kinds.items() if kind == topics.SCHEMA_FRAME_TRANSFORMS]
+    if topics.TF in kinds and topics.TF not in wanted:
+        wanted.append(topics.TF)
     out: list[FrameTransform] = []
-    for _, channel, message in reader.iter_messages(tf_topics):
+    tf_taken = False
+    tf_seen = False
+    for _, channel, message in reader.iter_messages(wanted) if wanted else ():
         if is_replaced_channel(channel, "/cldet/"):
+            tf_seen = tf_seen or channel.topic == topics.TF
             continue
-        for t in FrameTransforms.FromString(message.data).transforms:
-            out.append(FrameTransform(t.parent_frame_id, t.child_frame_id, np.eye(4)))
-    return out or None
+        if channel.topic == topics.TF:
+            tf_taken = tf_seen = True
+        if kinds.get(channel.topic) == topics.SCHEMA_FRAME_TRANSFORMS:
+            for t in FrameTransforms.FromString(message.data).transforms:
+                out.append(FrameTransform(t.parent_frame_id, t.child_frame_id, np.eye(4)))
+    if topics.TF in kinds and not tf_seen:
+        tf_taken = True  # a /tf channel without messages: leave it alone
+    return out or None, tf_taken
 
 
-def _tree_writer(
-    found: dict[str, int], lidar_frame: str, sensor: SensorConfig, stamp_ns: int
-) -> Addition:
+def _tree_writer(tf_taken: bool, lidar_frame: str, sensor: SensorConfig, stamp_ns: int) -> Addition:
     """Writes the frame tree of a log that has none, on ``/tf`` (``/cldet/tf`` when the log's
     ``/tf`` is taken, e.g. by ROS transforms), marked as a result."""
-    topic = topics.TF if topics.TF not in found else "/cldet/tf"
+    topic = "/cldet/tf" if tf_taken else topics.TF
     tree = log_tree(lidar_frame, sensor)
 
     def write(writer: LogWriter) -> None:

@@ -350,9 +350,6 @@ class RerunView:
             static=True,
         )
         rec.log("world/foreground", rr.Points3D.from_fields(radii=-3.0), static=True)
-        rec.log(
-            "plots/error_m", rr.SeriesLines(names="3D error (m)", colors=_ERROR_COLOUR), static=True
-        )
 
     def log_frame(self, frame: LidarFrame, detections: FrameDetections) -> None:
         """Buffer one frame's clouds, foreground (by cluster id), cluster boxes, causal estimate."""
@@ -445,7 +442,9 @@ class RerunView:
         if not self._live:  # the boxes of every frame, but the drone's (it has its own)
             for det in detections:
                 chosen_id = result.chosen.get(det.stamp_ns)
-                self._add_boxes(det.stamp_ns, [c for c in det.clusters if c.cluster_id != chosen_id])
+                self._add_boxes(
+                    det.stamp_ns, [c for c in det.clusters if c.cluster_id != chosen_id]
+                )
             self._flush()
         by_stamp = {d.stamp_ns: d for d in detections}
         chosen = [
@@ -521,6 +520,11 @@ class RerunView:
             )
         if errors_m is not None:
             self._has_truth_errors = True
+            rec.log(
+                "plots/error_m",
+                rr.SeriesLines(names="3D error (m)", colors=_ERROR_COLOUR),
+                static=True,
+            )
             rec.send_columns(
                 "plots/error_m",
                 indexes=[_time_column(stamps_ns)],

@@ -104,7 +104,9 @@ def tree_problem(transforms: Iterable[FrameTransform], frames: Iterable[str]) ->
             seen.add(node)
         roots.add(node)
     if len(roots) != 1:
-        return "the frames form " + f"{len(roots)} unconnected trees, rooted at " + ", ".join(
-            repr(r) for r in sorted(roots)
+        return (
+            "the frames form "
+            + f"{len(roots)} unconnected trees, rooted at "
+            + ", ".join(repr(r) for r in sorted(roots))
         )
     return None
