@@ -315,8 +315,6 @@ class RerunView:
         self._rec.set_sinks(*sinks)
         self._live = live is not None
         self._flush_every = 1 if self._live else _FLUSH_EVERY
-        if live is not None:  # the live viewer gets a layout at once; the final one at close
-            self._rec.send_blueprint(self._blueprint(), make_active=True, make_default=True)
         self._rec.send_recording_name(recording_name)
         self._mid360 = _CloudBuffer()
         self._avia = _CloudBuffer()
@@ -329,6 +327,8 @@ class RerunView:
         self._has_events = False
         self._closed = False
         self._log_static()
+        if self._live:  # the live viewer gets a layout at once; the final one at close
+            self._rec.send_blueprint(self._blueprint(), make_active=True, make_default=True)
 
     def _log_static(self) -> None:
         import rerun as rr
