@@ -129,7 +129,9 @@ def annotate(
     Each log is rewritten in place: its data is copied byte for byte into a temporary file (no
     decompression), the results are appended, and the file is renamed over the log when complete;
     an earlier annotation is replaced. New channels:
-    /cldet/estimate, /cldet/pose, /cldet/trajectory, /cldet/clusters, /cldet/foreground, and a
+    /cldet/estimate, /cldet/causal, /cldet/pose, /cldet/trajectory, /cldet/clusters,
+    /cldet/foreground, and point-cloud copies Rerun draws too (/cldet/drone, /cldet/track,
+    /cldet/truth_track, /cldet/centroids), a /tf frame tree when the log has none, and a
     `cldet.config` metadata record with the method and effective configuration.
 
     ROS 2 recordings (`ros2 bag record` writes MCAP) are read as they are: name the topics,
