@@ -374,7 +374,7 @@ class RerunView:
             return
         centres = np.array([c.centroid for c in clusters], dtype=np.float64)
         halves = np.array([min_half_sizes(c.lower, c.upper) for c in clusters], dtype=np.float64)
-        self._boxes.append((stamp_ns, centres, halves, [f"{c.n_points} pts" for c in clusters]))
+        self._boxes.append((stamp_ns, centres, halves, [_points(c.n_points) for c in clusters]))
 
     def _flush(self) -> None:
         import rerun as rr
@@ -407,7 +407,7 @@ class RerunView:
         colours = np.array([_SOURCE_COLOURS[e.source] for e in estimates], dtype=np.uint8)
         labels = [
             f"drone: {e.source.name.lower()}"
-            + (f", {e.n_points} pts" if e.n_points else "")
+            + (f", {_points(e.n_points)}" if e.n_points else "")
             + f", ±{e.sigma_m:.2f} m"
             for e in estimates
         ]
@@ -583,6 +583,10 @@ class RerunView:
             finally:
                 error = RuntimeError("review recording aborted")
                 self._stack.__exit__(type(error), error, None)  # removes the temporary file
+
+
+def _points(n: int) -> str:
+    return f"{n} pt" if n == 1 else f"{n} pts"
 
 
 def _cluster_palette() -> list[tuple[int, int, int]]:
