@@ -288,3 +288,27 @@ def test_a_live_run_streams_to_a_local_rerun_grpc_server_and_still_writes_the_rr
         "/world/drone/estimate",
         "/world/drone/trajectory",
     } <= paths, paths
+
+
+def test_foxglove_without_a_port_gets_the_default_one() -> None:
+    from cldet.commands.annotate import expand_optional_port
+
+    assert expand_optional_port(["annotate", "a.mcap", "--live", "--foxglove"]) == [
+        "annotate",
+        "a.mcap",
+        "--live",
+        "--foxglove",
+        "8765",
+    ]
+    assert expand_optional_port(["--foxglove", "a.mcap"]) == ["--foxglove", "8765", "a.mcap"]
+    assert expand_optional_port(["--foxglove", "9000", "a.mcap"]) == [
+        "--foxglove",
+        "9000",
+        "a.mcap",
+    ]
+
+
+def test_live_options_without_live_are_a_clear_error(tmp_path: Path) -> None:
+    result = CliRunner().invoke(app, ["annotate", str(tmp_path / "x.mcap"), "--realtime"])
+    assert result.exit_code == 1
+    assert "go with --live" in result.output and "Traceback" not in result.output
