@@ -54,6 +54,10 @@ class _Client:
         self.subscribe_to: str | None = None
         self._subscriptions: dict[int, int] = {}
         self.done = threading.Event()
+        self.ops: list[str] = []
+        self.resubscribed = 0
+        self._subscribed_at = 0.0
+        self.frames: list[tuple[int, int]] = []  # (opcode, payload length) of every frame
 
     def _read(self, n: int) -> bytes:
         out = b""
@@ -65,7 +69,13 @@ class _Client:
         return out
 
     def _frame(self) -> tuple[int, bytes]:
-        b0, b1 = self._read(2)
+        """The next frame; TimeoutError when none starts within a quarter second."""
+        self.sock.settimeout(0.25)
+        first = self.sock.recv(1)  # the wait between frames, nothing consumed on a timeout
+        if not first:
+            raise ConnectionError("closed")
+        self.sock.settimeout(10)  # the rest of a frame that has begun
+        b0, b1 = first[0], self._read(1)[0]
         length = b1 & 0x7F
         if length == 126:
             (length,) = struct.unpack(">H", self._read(2))
@@ -83,31 +93,47 @@ class _Client:
             header += bytes([0x80 | 126]) + struct.pack(">H", len(data))
         self.sock.sendall(header + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(data)))
 
+    def _subscribe(self, channel_id: int) -> None:
+        sub = len(self._subscriptions) + 1
+        self._subscriptions[sub] = channel_id
+        self._subscribed_at = time.monotonic()
+        self.send_text(
+            json.dumps({"op": "subscribe", "subscriptions": [{"id": sub, "channelId": channel_id}]})
+        )
+
+    def _resubscribe(self) -> None:
+        """A subscription sent right after the channel's advertisement is sometimes not
+        served (seen with foxglove-sdk 0.30.3 about one run in five): after a second without
+        data, subscribe again (as a client reconnecting would)."""
+        if not self._subscriptions or self.messages:
+            return
+        if time.monotonic() - self._subscribed_at < 1.0:
+            return
+        last = max(self._subscriptions)
+        self.send_text(json.dumps({"op": "unsubscribe", "subscriptionIds": [last]}))
+        self.resubscribed += 1
+        self._subscribe(self._subscriptions[last])
+
     def run(self) -> None:
         try:
             while not self.done.is_set():
                 try:
                     opcode, payload = self._frame()
-                except (TimeoutError, ConnectionError, OSError):
+                except TimeoutError:
+                    self._resubscribe()
+                    continue
+                except (ConnectionError, OSError) as err:
+                    self.ops.append(f"closed: {err!r}")
                     return
+                self.frames.append((opcode, len(payload)))
                 if opcode == 1:
                     msg = json.loads(payload)
+                    self.ops.append(msg.get("op", "?") + ":" + str(msg)[:300])
                     if msg.get("op") == "advertise":
                         for channel in msg["channels"]:
                             self.channels[channel["id"]] = channel
                             if channel["topic"] == self.subscribe_to:
-                                sub = len(self._subscriptions) + 1
-                                self._subscriptions[sub] = channel["id"]
-                                self.send_text(
-                                    json.dumps(
-                                        {
-                                            "op": "subscribe",
-                                            "subscriptions": [
-                                                {"id": sub, "channelId": channel["id"]}
-                                            ],
-                                        }
-                                    )
-                                )
+                                self._subscribe(channel["id"])
                 elif opcode == 2 and payload[:1] == b"\x01":  # messageData
                     sub, _ = struct.unpack_from("<IQ", payload, 1)
                     self.messages.setdefault(self._subscriptions[sub], []).append(payload[13:])
@@ -168,7 +194,14 @@ def test_a_live_run_streams_its_channels_to_a_local_foxglove_client(
     assert schemas[topics.LIDAR_360] == topics.SCHEMA_POINT_CLOUD
     (causal_id,) = [i for i, c in client.channels.items() if c["topic"] == topics.CAUSAL]
     received = client.messages.get(causal_id, [])
-    assert len(received) >= report.frames // 2, (len(received), report.frames)
+    assert len(received) >= report.frames // 2, (
+        len(received),
+        report.frames,
+        [o[:40] for o in client.ops],
+        sorted(client.topics()),
+        client._subscriptions,
+        len(client.frames),
+    )
     first = Estimate.FromString(received[-1])
     assert first.source != 0 and first.timestamp.seconds > 0
     assert len(latencies) == report.frames
