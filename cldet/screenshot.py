@@ -29,9 +29,18 @@ __all__ = ["missing_tools", "scene_fill", "screenshot"]
 WINDOW_SIZE = (1600, 1000)  # logical points; the PNG is twice that on this viewer
 
 
+_VULKAN_DRIVERS = ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d")
+
+
 def missing_tools() -> list[str]:
-    """The programs a screenshot needs that are not on PATH (``xvfb-run``, ``rerun``)."""
-    return [tool for tool in ("xvfb-run", "Xvfb", "rerun") if shutil.which(tool) is None]
+    """What a screenshot needs and this machine lacks: ``xvfb-run``, ``Xvfb``, ``rerun`` on PATH
+    and a Vulkan driver (an ICD file, e.g. Mesa's llvmpipe from ``mesa-vulkan-drivers``)."""
+    missing = [tool for tool in ("xvfb-run", "Xvfb", "rerun") if shutil.which(tool) is None]
+    if not any(
+        Path(folder).is_dir() and any(Path(folder).glob("*.json")) for folder in _VULKAN_DRIVERS
+    ):
+        missing.append("a Vulkan driver")
+    return missing
 
 
 def screenshot(
