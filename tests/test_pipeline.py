@@ -155,6 +155,8 @@ def test_review_recording_has_the_entities_and_verifies(source_log: Path, tmp_pa
         "/world/drone/estimate",
         "/world/drone/trajectory",
         "/world/truth/trajectory",
+        "/world/truth/position",
+        "/world/truth/error",
         "/plots/error_m",
     }
     assert expected <= paths, expected - paths
