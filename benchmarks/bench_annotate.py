@@ -18,11 +18,12 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import os
-import platform
 import shutil
 import tempfile
 import time
 from pathlib import Path
+
+from machine import cpu_model  # benchmarks/machine.py (the script's folder is on the path)
 
 from cldet.calibrate import calibrate_logs
 from cldet.config import load_config
@@ -32,16 +33,6 @@ from cldet.pipeline import annotate_log
 from cldet.results import read_truth
 from cldet.simulate import simulate_dataset
 from converters.mcap_convert import convert_dataset
-
-
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def main() -> None:
@@ -129,7 +120,7 @@ def main() -> None:
 
         print()
         print(
-            f"cldet annotate benchmark, {dt.date.today()}, {_cpu_model()}, {os.cpu_count()} cores (1 used)"
+            f"cldet annotate benchmark, {dt.date.today()}, {cpu_model()}, {os.cpu_count()} cores (1 used)"
         )
         print(f"data: {data} ({args.split} split, {len(logs)} sequences)")
         header = (

@@ -26,6 +26,7 @@ with at least one point on the drone (fast passes and high hovers are sparse by 
     python benchmarks/bench_robustness.py --seeds 10000-10059 --kinds fast_pass,high_hover \\
         --methods track --json /tmp/rows.json
     python benchmarks/bench_robustness.py --probes --probe-seeds 10000-10002
+    python benchmarks/bench_robustness.py --model model.zip              # adds track-model
 
 ``--probes`` runs the review's probes on the project's ORIGINAL simulator (``simulate_sequence``
 and its six ``SCENARIOS``): 18 sequences per probe (3 seeds x 6 scenarios) for a static 0.3 m
@@ -42,6 +43,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMB
     os.environ.setdefault(_var, "1")  # one core per worker process
 
 import argparse  # noqa: E402
+import functools  # noqa: E402
 import json  # noqa: E402
 import multiprocessing  # noqa: E402
 import shutil  # noqa: E402
@@ -56,7 +58,7 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
-METHODS: tuple[str, ...] = ("track-causal", "track", "cl-det")
+METHODS: tuple[str, ...] = ("track-causal", "track", "track-model", "cl-det")
 FAIL_RMS_M = 1.0
 DEVELOPMENT = "10000-19999"
 EVALUATION = "90000-90299"
@@ -130,19 +132,31 @@ class Job:
     config: str | None
     probe: str | None = None  # probes mode: the probe's name
     scenario: str | None = None  # probes mode: the original simulator's scenario
+    model: str | None = None  # track-model: the model file (`cldet train`)
+
+
+@functools.cache
+def _model(path: str) -> Any:
+    from cldet.modelfile import load_model
+
+    return load_model(path)
 
 
 def _estimate(
-    frames: Callable[[], Iterable[Any]], method: str, config_path: str | None
+    frames: Callable[[], Iterable[Any]],
+    method: str,
+    config_path: str | None,
+    model_path: str | None = None,
 ) -> tuple[Any, float, str | None]:
     """Run the estimator; (SequenceEstimate or None, seconds, error text or None)."""
     from cldet.config import load_config
-    from cldet.core.estimator import estimate_sequence
+    from cldet.core.methods import estimate_sequence
 
     config = load_config(Path(config_path) if config_path else None, overrides={"method": method})
+    model = _model(model_path) if model_path else None
     started = time.perf_counter()
     try:
-        _, est = estimate_sequence(frames, config)
+        _, est = estimate_sequence(frames, config, model)
     except Exception as err:  # a crash is a failed sequence, reported as such
         return None, time.perf_counter() - started, f"{type(err).__name__}: {err}"
     return est, time.perf_counter() - started, None
@@ -187,6 +201,13 @@ def _method_rows(
                 {**common, "method": method, "rms": rms, "sse": sse, "n": n,
                  "coverage": coverage, "seconds": seconds, "error": error}
             )  # fmt: skip
+    if "track-model" in job.methods:
+        est, seconds, error = _estimate(frames, "track", job.config, job.model)
+        rms, sse, n = score(None if est is None else est.estimates, stamps_ns, truth)
+        rows.append(
+            {**common, "method": "track-model", "rms": rms, "sse": sse, "n": n,
+             "seconds": seconds, "error": error}
+        )  # fmt: skip
     if "cl-det" in job.methods:
         est, seconds, error = _estimate(frames, "cl-det", job.config)
         rms, sse, n = score(None if est is None else est.estimates, stamps_ns, truth)
@@ -400,6 +421,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--sites", help="comma-separated sites to keep")
     parser.add_argument("--config", type=Path, help="estimator configuration (YAML)")
     parser.add_argument(
+        "--model", type=Path, help="a model from `cldet train`: adds the method track-model"
+    )
+    parser.add_argument(
         "--json", type=Path, help="write the per-sequence rows here (updated after each sequence)"
     )
     parser.add_argument(
@@ -427,6 +451,11 @@ def main(argv: list[str] | None = None) -> None:
     if unknown:
         parser.error(f"unknown method(s) {', '.join(unknown)}: expected {', '.join(METHODS)}")
     config = str(args.config) if args.config else None
+    model = str(args.model) if args.model else None
+    if model is None:
+        methods = tuple(m for m in methods if m != "track-model")
+    elif "track-model" not in methods:
+        methods = (*methods, "track-model")
     jobs: list[Job] = []
     if args.probes:
         seeds = args.probe_seeds or parse_seeds(EVALUATION_PROBES)
@@ -434,7 +463,7 @@ def main(argv: list[str] | None = None) -> None:
             duration = PROBE_DURATION_S.get(probe, args.probe_duration)
             for scenario in SCENARIOS:
                 for seed in seeds:
-                    jobs.append(Job(seed, duration, methods, config, probe, scenario))
+                    jobs.append(Job(seed, duration, methods, config, probe, scenario, model))
     else:
         seeds = args.seeds or parse_seeds(EVALUATION)
         kinds = set(args.kinds.split(",")) if args.kinds else set(KINDS)
@@ -445,7 +474,7 @@ def main(argv: list[str] | None = None) -> None:
         for seed in seeds:
             world = draw_world(seed)
             if world.kind in kinds and world.site in sites:
-                jobs.append(Job(seed, args.duration, methods, config))
+                jobs.append(Job(seed, args.duration, methods, config, model=model))
     rows: list[dict[str, Any]] = []
     if args.resume:
         if not args.json:

@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from cldet.config import load_config
-from cldet.core.estimator import estimate_sequence
 from cldet.core.frames import pair_frames
+from cldet.core.methods import estimate_sequence
 from cldet.simulate import SCENARIOS
 from cldet.simulate.dataset import simulate_sequence
 from converters.mmaud import find_sequences, iter_clouds

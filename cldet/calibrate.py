@@ -17,12 +17,13 @@ import numpy as np
 import yaml
 
 from cldet.config import BiasConfig
-from cldet.core.bias import apply_bias, fit_bias_sequences
+from cldet.core.bias import apply_bias, detection_pairs, fit_bias_sequences
+from cldet.core.trajectory import rms
 from cldet.errors import CldetError
 from cldet.io import topics
 from cldet.io.mcap_read import open_log
 from cldet.results import write_atomic
-from cldet.types import Estimate, PositionSample, Source
+from cldet.types import Estimate, PositionSample
 
 
 @dataclass(frozen=True)
@@ -69,25 +70,15 @@ def _read(log: Path) -> tuple[list[Estimate], list[PositionSample]]:
 def _rms(
     pairs: Sequence[tuple[list[Estimate], list[PositionSample]]], bias: BiasConfig
 ) -> tuple[float, int]:
-    from cldet.core.trajectory import evaluate_trajectory
-
-    errors = []
+    """RMS distance (metres) of the corrected detections to the truth, and their number."""
+    errors = [np.zeros(0)]
     for estimates, truth in pairs:
-        det = [e for e in estimates if e.source == Source.DETECTED]
-        if not det or len(truth) < 2:
+        if len(truth) < 2:
             continue
-        t_ns = np.array([t.stamp_ns for t in truth], dtype=np.int64)
-        inside = [e for e in det if t_ns.min() <= e.stamp_ns <= t_ns.max()]
-        if not inside:
-            continue
-        stamps = np.array([e.stamp_ns for e in inside], dtype=np.int64)
-        true = evaluate_trajectory(t_ns, np.array([t.position for t in truth]), stamps)
-        corrected = apply_bias(np.array([e.position for e in inside]), bias)
-        errors.append(np.linalg.norm(corrected - true, axis=1))
-    if not errors:
-        return float("nan"), 0
+        detected, true = detection_pairs(estimates, truth)
+        errors.append(np.linalg.norm(apply_bias(detected, bias) - true, axis=1))
     all_errors = np.concatenate(errors)
-    return float(np.sqrt(np.mean(all_errors**2))), len(all_errors)
+    return rms(all_errors), len(all_errors)
 
 
 def calibrate_logs(logs: Sequence[Path]) -> Calibration:

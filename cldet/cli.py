@@ -14,8 +14,9 @@ from cldet.commands import (  # noqa: F401  (each module registers its commands)
     calibrate,
     convert,
     demo,
-    results,
     simulate,
+    submission,
+    train,
 )
 from cldet.commands._app import app
 from cldet.commands.annotate import expand_optional_port

@@ -164,7 +164,13 @@ class TrackingConfig(BaseModel):
 
     model_config = _STRICT
 
-    accel_psd: float = Field(default=4.0, gt=0, description="white-acceleration PSD q, m^2/s^3")
+    accel_psd: float = Field(
+        default=4.0,
+        gt=0,
+        description="white-acceleration PSD q of the candidate tracks' Kalman filter, m^2/s^3:"
+        " it sizes the gate, so a manoeuvring drone stays inside it (the offline smoother has"
+        " its own, smoothing.accel_psd)",
+    )
     meas_sigma_m: float = Field(default=0.12, gt=0, description="centroid noise, 1 sigma")
     raw_meas_sigma_m: float = Field(default=0.25, gt=0, description="noise of a raw-gate detection")
     init_speed_sigma: float = Field(
@@ -308,7 +314,11 @@ class SmoothingConfig(BaseModel):
     model_config = _STRICT
 
     accel_psd: float = Field(
-        default=2.0, gt=0, description="white-acceleration PSD of the smoother"
+        default=2.0,
+        gt=0,
+        description="white-acceleration PSD q of the offline smoother, m^2/s^3: how closely the"
+        " final trajectory follows the chosen detections (the tracker's gate has its own,"
+        " tracking.accel_psd)",
     )
     extrapolation_tau_s: float = Field(
         default=1.5,

@@ -14,7 +14,7 @@ matched rows only and the counts are reported alongside.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,6 +29,7 @@ from cldet.results import (
     RowKey,
     TruthRow,
     TruthTable,
+    read_log_truth,
     read_results,
     write_atomic,
 )
@@ -92,6 +93,15 @@ class Evaluation:
     missing_examples: tuple[RowKey, ...]  # up to EXAMPLE_KEYS (sequence, stamp ns)
     duplicate_examples: tuple[RowKey, ...]
     unmatched_examples: tuple[RowKey, ...]
+
+    def confusion(self) -> str | None:
+        """The confusion matrix of the rows with a true class, as text (None: no such row)."""
+        known = self.rows.class_true >= 0
+        if not known.any():
+            return None
+        true, pred = self.rows.class_true[known], self.rows.class_pred[known]
+        ids = sorted(set(true.tolist()) | set(pred.tolist()))
+        return confusion_text(true.tolist(), pred.tolist(), ids)
 
     @property
     def warnings(self) -> tuple[str, ...]:
@@ -279,6 +289,26 @@ def score(results: Iterable[ResultRow], truth: TruthTable, *, results_path: str 
     )
 
 
+def confusion_text(
+    true: Sequence[int],
+    predicted: Sequence[int],
+    class_ids: Sequence[int],
+    weights: Sequence[float] | None = None,
+) -> str:
+    """A confusion matrix as text: one row per true class, one column per predicted class,
+    counting rows (or summing ``weights``)."""
+    from sklearn.metrics import confusion_matrix
+
+    cm = confusion_matrix(true, predicted, labels=list(class_ids), sample_weight=weights)
+    width = max(7, *(len(str(int(v))) + 1 for v in cm.ravel()))
+    head = "true \\ predicted".ljust(17) + "".join(str(c).rjust(width) for c in class_ids)
+    body = [
+        str(c).ljust(17) + "".join(str(int(v)).rjust(width) for v in row)
+        for c, row in zip(class_ids, cm, strict=True)
+    ]
+    return "\n".join([head, *body])
+
+
 def _accuracy(pred: NDArray[np.int64], true: NDArray[np.int64]) -> tuple[float | None, int]:
     """(fraction of rows with pred == true among rows with a true class, or None; that count)."""
     known = true >= 0
@@ -342,8 +372,6 @@ def truth_from_logs(logs: Iterable[Path | str], progress: Progress | None = None
         LogError: a log cannot be read, has no sequence name or no ground truth.
         ResultsError: two logs hold the same sequence and stamp.
     """
-    from cldet.export import read_log_truth
-
     rows: list[TruthRow] = []
     seen: dict[RowKey, str] = {}
     paths = [Path(p) for p in logs]

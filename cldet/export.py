@@ -14,8 +14,9 @@ Rules, all reported in the returned :class:`ExportReport`:
 - A query sequence with no log, or whose log was never annotated (or has no usable estimate),
   is an error; with ``allow_fallback`` (``--allow-fallback``) it gets the global constant
   :data:`FALLBACK_POSITION_M` (the training-set mean position) on every row, and a warning.
-- ``Classification`` is the constant :data:`DEFAULT_CLASS_ID` (no classifier yet) unless a
-  class id is given.
+- ``Classification`` is the log's final ``/cldet/class`` estimate (written by
+  ``cldet annotate --model``), else the constant :data:`DEFAULT_CLASS_ID`; a class id given
+  explicitly is written on every row instead.
 - Without a query file, the rows are each log's ``/ground_truth`` stamps (to score a split that
   has ground truth); logs without ground truth are skipped with a warning.
 """
@@ -34,24 +35,23 @@ from cldet.config import TRAINING_MEAN_POSITION_M
 from cldet.core.trajectory import evaluate_trajectory
 from cldet.errors import LogError, OutputExistsError, ResultsError
 from cldet.io import topics
-from cldet.io.mcap_read import LogReader, open_log
+from cldet.io.mcap_read import open_log
 from cldet.progress import NullProgress, Progress
 from cldet.results import (
     QueryRow,
     ResultRow,
-    TruthRow,
     normalise_sequence,
+    read_log_truth,
     read_timestamps,
     write_results,
 )
-from cldet.stamps import format_stamp
 from cldet.types import Source
 
 FALLBACK_POSITION_M: Final[tuple[float, float, float]] = TRAINING_MEAN_POSITION_M
 """Position (metres, Mid-360 frame) for a sequence without any estimate: the training-set mean
 (the estimator's default ``tracking.fallback_position`` too)."""
 DEFAULT_CLASS_ID: Final = 0
-"""Classification written for every row until a classifier exists."""
+"""Classification written for a log without a ``/cldet/class`` estimate (no model used)."""
 DEFAULT_MAX_EXTRAPOLATION_NS: Final = 1_000_000_000
 """How far beyond its first or last estimate a track's motion is followed by default (1 s); a
 query further out gets the position reached there. A drone at 10 m/s is 10 m away after 1 s:
@@ -69,6 +69,7 @@ class LogTrack:
     positions: NDArray[np.float64]  # (K, 3) metres, Mid-360 frame
     n_fallback_dropped: int  # FALLBACK estimates ignored because the track has its own
     annotated: bool = True  # the log has a /cldet/estimate channel (was annotated)
+    class_id: int | None = None  # the final /cldet/class estimate (None: no model was used)
 
 
 @dataclass(frozen=True)
@@ -94,18 +95,6 @@ class ExportReport:
         )
 
 
-def _source_metadata(log: LogReader) -> tuple[str, str]:
-    """(sequence, split) from the log's ``cldet.source`` metadata."""
-    source = log.metadata().get(topics.METADATA_SOURCE, {})
-    sequence = source.get("sequence", "").strip()
-    if not sequence:
-        raise LogError(
-            f"{log.path}: no sequence name in its {topics.METADATA_SOURCE!r} metadata: "
-            "expected a log written by `cldet convert` (and `cldet annotate`)"
-        )
-    return sequence, source.get("split", "").strip()
-
-
 def read_log_track(path: Path | str) -> LogTrack:
     """Read a log's sequence name and estimated trajectory (``/cldet/estimate``).
 
@@ -116,11 +105,15 @@ def read_log_track(path: Path | str) -> LogTrack:
         LogError: the log cannot be read, or has no sequence name in its metadata.
     """
     with open_log(path) as log:
-        sequence, split = _source_metadata(log)
+        sequence, split = log.source()
         stamps: list[int] = []
         positions: list[NDArray[np.float64]] = []
         fallback: list[bool] = []
         annotated = topics.ESTIMATE in log.list_topics()
+        class_id = None
+        if log.list_topics().get(topics.CLASS_ESTIMATE, 0) > 0:
+            for estimate_class in log.iter_class_estimates(topics.CLASS_ESTIMATE):
+                class_id = estimate_class.class_id  # the last one holds all the evidence
         if log.list_topics().get(topics.ESTIMATE, 0) > 0:
             for estimate, _track_id in log.iter_estimates(topics.ESTIMATE):
                 if np.all(np.isfinite(estimate.position)):
@@ -135,49 +128,16 @@ def read_log_track(path: Path | str) -> LogTrack:
         n_dropped = int(is_fallback.sum())
         stamps_ns, pos = stamps_ns[~is_fallback], pos[~is_fallback]
     order = np.argsort(stamps_ns, kind="stable")
-    return LogTrack(Path(path), sequence, split, stamps_ns[order], pos[order], n_dropped, annotated)
-
-
-def read_log_truth(path: Path | str) -> list[TruthRow]:
-    """The ground-truth rows of one log: ``/ground_truth`` positions, with ``/class`` if present.
-
-    Each row's class is the label at or before its stamp (the first label for earlier stamps);
-    ``None`` when the log has no ``/class`` channel. Timestamps are formatted with 6 decimals.
-
-    Raises:
-        LogError: the log cannot be read, has no sequence name or no ``/ground_truth`` messages.
-    """
-    with open_log(path) as log:
-        sequence, _split = _source_metadata(log)
-        counts = log.list_topics()
-        if counts.get(topics.GROUND_TRUTH, 0) == 0:
-            listing = ", ".join(f"{t} ({n})" for t, n in counts.items()) or "none"
-            raise LogError(
-                f"{log.path}: no {topics.GROUND_TRUTH} messages (sequence {sequence}); "
-                f"topics in the file: {listing}"
-            )
-        truth = list(log.iter_positions(topics.GROUND_TRUTH))
-        labels = list(log.iter_classes(topics.CLASS)) if counts.get(topics.CLASS, 0) > 0 else []
-    label_ns = np.array([c.stamp_ns for c in labels], dtype=np.int64)
-    label_id = [c.class_id for c in labels]
-    rows = []
-    for sample in truth:
-        class_id = None
-        if label_id:
-            i = int(np.searchsorted(label_ns, sample.stamp_ns, side="right")) - 1
-            class_id = label_id[max(i, 0)]
-        x, y, z = (float(v) for v in sample.position)
-        rows.append(
-            TruthRow(sequence, format_stamp(sample.stamp_ns), sample.stamp_ns, (x, y, z), class_id)
-        )
-    return rows
+    return LogTrack(
+        Path(path), sequence, split, stamps_ns[order], pos[order], n_dropped, annotated, class_id
+    )
 
 
 def export_results(
     logs: Iterable[Path | str],
     out: Path | str,
     timestamps: Path | str | None = None,
-    class_id: int = DEFAULT_CLASS_ID,
+    class_id: int | None = None,
     *,
     overwrite: bool = False,
     max_extrapolation_ns: int | None = DEFAULT_MAX_EXTRAPOLATION_NS,
@@ -192,7 +152,8 @@ def export_results(
         timestamps: the query file (``test_timestamps.csv``); rows are written in its order with
             its Sequence and Timestamp strings. ``None``: a row at every ``/ground_truth`` stamp
             of every log, in log order.
-        class_id: the Classification of every row.
+        class_id: the Classification of every row; ``None``: each log's final ``/cldet/class``
+            estimate, else :data:`DEFAULT_CLASS_ID`.
         overwrite: replace an existing ``out``.
         max_extrapolation_ns: follow the track's motion at most this far beyond its first or
             last estimate, then hold (see :func:`~cldet.core.trajectory.evaluate_trajectory`);
@@ -302,8 +263,14 @@ def export_results(
     if unused:
         warnings.append(f"{len(unused)} logs have no query row: {', '.join(unused)}")
 
+    def row_class(sequence_key: str) -> int:
+        if class_id is not None:
+            return int(class_id)
+        track = tracks.get(sequence_key)
+        return DEFAULT_CLASS_ID if track is None or track.class_id is None else track.class_id
+
     rows = [
-        ResultRow(q.sequence, q.timestamp, q.stamp_ns, (p[0], p[1], p[2]), int(class_id))
+        ResultRow(q.sequence, q.timestamp, q.stamp_ns, (p[0], p[1], p[2]), row_class(q.key[0]))
         for q, p in zip(queries, positions.tolist(), strict=True)
     ]
     write_results(out_path, rows, overwrite=overwrite)

@@ -31,6 +31,7 @@ from cldet.errors import CldetError
 from cldet.io import topics
 from cldet.io.mcap_write import LogWriter
 from cldet.io.transforms import log_tree
+from cldet.result_channels import causal_additions, track_writer
 from cldet.stamps import NS_PER_S
 from cldet.types import LidarFrame
 
@@ -114,8 +115,6 @@ class FoxgloveView:
 
     def log_frame(self, frame: LidarFrame, detections: FrameDetections) -> None:
         """The frame's clouds, foreground, clusters, causal estimate (and the frame tree)."""
-        from cldet.pipeline import causal_additions
-
         w, stamp = self._writer, frame.stamp_ns
         w.write_transforms(topics.TF, stamp, self._tree)  # every frame: late clients get it too
         w.write_cloud(topics.LIDAR_360, stamp, frame.mid360, self._frame)
@@ -126,8 +125,6 @@ class FoxgloveView:
 
     def log_result(self, result: SequenceEstimate, detections: Sequence[FrameDetections]) -> None:
         """The refined track, at the last frame's stamp (so a live view shows it at the end)."""
-        from cldet.pipeline import track_writer
-
         if result.estimates and self._last_ns is not None:
             positions = np.array([e.position for e in result.estimates], dtype=np.float64)
             track_writer(self._last_ns, positions, self._frame)(self._writer)

@@ -31,8 +31,11 @@ from scipy.spatial.transform import Rotation
 
 from cldet import __version__
 from cldet.config import CldetConfig, FramesConfig, SensorConfig, config_to_dict
-from cldet.core.estimator import FrameDetections, SequenceEstimate, make_estimator
+from cldet.core.estimator import FrameDetections
 from cldet.core.frames import pair_frames
+from cldet.core.methods import make_estimator
+from cldet.core.model import LearnedModel
+from cldet.core.trajectory import rms, trajectory_errors
 from cldet.errors import CldetError, FrameOrderError
 from cldet.io import topics
 from cldet.io.files import check_output, lock_file
@@ -50,6 +53,7 @@ from cldet.io.sources import (
 from cldet.io.transforms import log_tree
 from cldet.live import LiveOutput
 from cldet.progress import NullProgress, Progress
+from cldet.result_channels import result_additions
 from cldet.signals import init_worker, stop_workers
 from cldet.types import Cloud, Estimate, LidarFrame, Source
 from cldet.view import NullView, RerunView, TeeView, View
@@ -99,7 +103,7 @@ def _avia_extrinsic(cfg: FramesConfig) -> NDArray[np.float64] | None:
     return matrix
 
 
-def _frames(
+def read_frames(
     log: Path, sensors: SensorTopics, cfg: FramesConfig, lidar_frame: list[str] | None = None
 ) -> Iterator[LidarFrame]:
     """The LiDAR's frames paired with the Avia's, both streamed (one pass over each topic).
@@ -138,6 +142,7 @@ def annotate_log(
     lidar: str | None = None,
     avia: str | None = None,
     truth: str | None = None,
+    model: LearnedModel | None = None,
     live: LiveOutput | None = None,
 ) -> AnnotateReport:
     """Estimate the drone's position at every Mid-360 frame of ``log`` and write the results back.
@@ -159,6 +164,9 @@ def annotate_log(
             with ``/lidar_360``, else none).
         truth: a ground-truth position topic for the reported error (default:
             ``/ground_truth`` when present).
+        model: a model from ``cldet train`` (``track`` only): its scan-time offset and bias
+            replace the configuration's, its scorer picks the drone's tracks and its classifier
+            writes ``/cldet/class``.
         live: stream each frame as it is processed (and the refined track at the end) to a
             Rerun viewer and/or a Foxglove server (:mod:`cldet.live`), paced at the sensor's
             rate when it says so; the outputs are written as without it.
@@ -173,6 +181,8 @@ def annotate_log(
     """
     started = time.perf_counter()
     config = config or CldetConfig()
+    if model is not None:
+        config = model.configure(config)
     progress = progress or NullProgress()
     log = Path(log)
     output = Path(output) if output is not None else log
@@ -209,12 +219,12 @@ def annotate_log(
     if foxglove_view is not None:
         view = TeeView(view, foxglove_view)
     try:
-        estimator = make_estimator(config)
+        estimator = make_estimator(config, model)
         progress.start(n_frames, f"{sequence}: tracking")
         detections: list[FrameDetections] = []
         lidar_frame: list[str] = []
         try:
-            for frame in _frames(log, sensors, config.frames, lidar_frame):
+            for frame in read_frames(log, sensors, config.frames, lidar_frame):
                 if live is not None:
                     live.pace(frame.stamp_ns)
                 in_hand = time.perf_counter()
@@ -229,14 +239,14 @@ def annotate_log(
         result = estimator.refine()
         view.log_result(result, detections)
         truths = list(iter_log_positions(log, sensors.truth)) if sensors.truth else []
-        rms = None
+        rms_m: float | None = None
         truth_xyz: NDArray[np.float64] | None = None
         if truths:
             truth_ns = np.array([t.stamp_ns for t in truths], dtype=np.int64)
             truth_xyz = np.array([t.position for t in truths], dtype=np.float64)
             errors = _truth_errors(result.estimates, truth_ns, truth_xyz)
             view.log_truth(truth_ns, truth_xyz, errors, _estimates_at(result.estimates, truth_ns))
-            rms = None if errors is None else float(np.sqrt(np.mean(errors**2)))
+            rms_m = None if errors is None else rms(errors)
         frame_id = lidar_frame[0] if lidar_frame else topics.FRAME_MID360
         additions = result_additions(result, detections, frame_id=frame_id, truth=truth_xyz)
         if tree is None:  # a log without a frame tree gets one (replaced by the next run)
@@ -251,6 +261,7 @@ def annotate_log(
                 "lidar": sensors.lidar,
                 "avia": sensors.avia or "",
                 "truth": sensors.truth or "",
+                "model": "" if model is None else json.dumps(model.describe_source()),
             }
         }
         rewrite_log(
@@ -275,7 +286,7 @@ def annotate_log(
         frames=len(detections),
         sources=sources,
         seconds=time.perf_counter() - started,
-        rms_error_m=rms,
+        rms_error_m=rms_m,
     )
 
 
@@ -283,13 +294,11 @@ def _truth_errors(
     estimates: Sequence[Estimate], truth_ns: np.ndarray, truth_xyz: np.ndarray
 ) -> np.ndarray | None:
     """(K,) 3D distance, metres, of the estimated trajectory to the truth at its K stamps."""
-    from cldet.core.trajectory import evaluate_trajectory
-
     if not estimates:
         return None
     stamps = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
     positions = np.array([e.position for e in estimates], dtype=np.float64)
-    return np.linalg.norm(evaluate_trajectory(stamps, positions, truth_ns) - truth_xyz, axis=1)
+    return trajectory_errors(truth_ns, truth_xyz, stamps, positions)
 
 
 def review_application_id(log: Path, split: str, sequence: str) -> str:
@@ -358,151 +367,6 @@ def _tree_writer(tf_taken: bool, lidar_frame: str, sensor: SensorConfig, stamp_n
     return write
 
 
-_SOURCE_RGBA: dict[Source, tuple[int, int, int, int]] = {
-    Source.DETECTED: (40, 220, 60, 255),
-    Source.PREDICTED: (255, 170, 0, 255),
-    Source.SMOOTHED: (80, 200, 255, 255),
-    Source.FALLBACK: (255, 40, 40, 255),
-}
-_TRACK_RGBA = (255, 60, 200, 255)
-_TRUTH_RGBA = (255, 255, 255, 255)
-_CHOSEN_RGBA = (40, 220, 60, 255)
-_CLUSTER_RGBA = (255, 150, 0, 255)
-
-
-def result_additions(
-    result: SequenceEstimate,
-    detections: Sequence[FrameDetections],
-    *,
-    frame_id: str = topics.FRAME_MID360,
-    truth: NDArray[np.float64] | None = None,
-) -> list[tuple[int, Addition]]:
-    """The ``/cldet/*`` messages of one annotate run, as ``(log_time_ns, write)`` pairs.
-
-    All in ``frame_id`` (the LiDAR's frame). Foxglove draws every one of them; Rerun's MCAP
-    import draws the point clouds (``/cldet/drone``, ``/cldet/track``, ``/cldet/truth_track``,
-    ``/cldet/centroids``, ``/cldet/foreground``), not the poses or the scene update.
-
-    - ``/cldet/estimate`` (cldet.Estimate) and ``/cldet/pose`` (foxglove.PoseInFrame)
-      per estimate of the refined track;
-    - ``/cldet/causal`` (cldet.Estimate): the causal estimate of each frame, as it was made
-      from that frame and the ones before (what a live run shows);
-    - ``/cldet/trajectory`` (foxglove.PosesInFrame): the whole smoothed trajectory, once, at the
-      first frame's stamp, so a viewer shows it for the whole playback;
-    - ``/cldet/clusters`` (foxglove.SceneUpdate) per frame: a box and label per cluster, the
-      chosen one as a separate green ``drone`` entity;
-    - ``/cldet/foreground`` (foxglove.PointCloud x, y, z, cluster_id) per frame;
-    - ``/cldet/drone`` (the estimate, coloured by source) and ``/cldet/centroids`` (cluster
-      centres, the chosen one green) per frame, ``/cldet/track`` (the refined track, magenta)
-      and ``/cldet/truth_track`` (``truth``, (K, 3) metres, white) once at the first stamp:
-      coloured point clouds, which Rerun draws too.
-    """
-    additions: list[tuple[int, Addition]] = []
-    for est in result.estimates:
-        additions.append((est.stamp_ns, _estimate_writer(est, frame_id)))
-    for est in result.causal:
-        additions.append((est.stamp_ns, _causal_writer(est)))
-    if result.estimates:
-        first = result.estimates[0].stamp_ns
-        positions = np.array([e.position for e in result.estimates], dtype=np.float64)
-        additions.append((first, track_writer(first, positions, frame_id)))
-        if truth is not None and len(truth):
-            truth_xyz = np.asarray(truth, dtype=np.float64)
-            additions.append(
-                (
-                    first,
-                    lambda w: w.write_colored_cloud(
-                        topics.TRUTH_TRACK, first, truth_xyz, _TRUTH_RGBA, frame_id
-                    ),
-                )
-            )
-    for det in detections:
-        chosen_id = result.chosen.get(det.stamp_ns)
-        additions.append((det.stamp_ns, _clusters_writer(det, chosen_id, frame_id)))
-    return additions
-
-
-def track_writer(stamp_ns: int, positions: NDArray[np.float64], frame_id: str) -> Addition:
-    """Writes the refined track: ``/cldet/trajectory`` (poses) and ``/cldet/track`` (cloud)."""
-
-    def write(writer: LogWriter) -> None:
-        writer.write_poses(topics.TRAJECTORY, stamp_ns, positions, frame_id)
-        writer.write_colored_cloud(topics.TRACK, stamp_ns, positions, _TRACK_RGBA, frame_id)
-
-    return write
-
-
-def _estimate_writer(est: Estimate, frame_id: str) -> Addition:
-    def write(writer: LogWriter) -> None:
-        writer.write_estimate(topics.ESTIMATE, est.stamp_ns, est)
-        writer.write_pose(topics.POSE, est.stamp_ns, est.position, frame_id)
-        writer.write_colored_cloud(
-            topics.DRONE, est.stamp_ns, est.position[None, :], _SOURCE_RGBA[est.source], frame_id
-        )
-
-    return write
-
-
-def causal_additions(det: FrameDetections, frame_id: str) -> list[tuple[int, Addition]]:
-    """What a live view shows of one frame as it is processed: its foreground, cluster centres
-    and boxes, and the causal estimate (``/cldet/causal``, ``/cldet/drone``, ``/cldet/pose``)."""
-    additions = [(det.stamp_ns, _clusters_writer(det, None, frame_id))]
-    est = det.estimate
-    if est is not None:
-
-        def write(writer: LogWriter) -> None:
-            writer.write_estimate(topics.CAUSAL, est.stamp_ns, est)
-            writer.write_pose(topics.POSE, est.stamp_ns, est.position, frame_id)
-            writer.write_colored_cloud(
-                topics.DRONE,
-                est.stamp_ns,
-                est.position[None, :],
-                _SOURCE_RGBA[est.source],
-                frame_id,
-            )
-
-        additions.append((det.stamp_ns, write))
-    return additions
-
-
-def _causal_writer(est: Estimate) -> Addition:
-    def write(writer: LogWriter) -> None:
-        writer.write_estimate(topics.CAUSAL, est.stamp_ns, est)
-
-    return write
-
-
-def _clusters_writer(det: FrameDetections, chosen_id: int | None, frame_id: str) -> Addition:
-    def write(writer: LogWriter) -> None:
-        cloud = np.column_stack([det.foreground, det.labels.astype(np.float32)])
-        writer.write_cloud(
-            topics.FOREGROUND,
-            det.stamp_ns,
-            cloud,
-            frame_id,
-            fields=("x", "y", "z", "cluster_id"),
-        )
-        others = [c for c in det.clusters if c.cluster_id != chosen_id]
-        writer.write_scene_update(topics.CLUSTERS, det.stamp_ns, others, frame_id)
-        chosen = [c for c in det.clusters if c.cluster_id == chosen_id]
-        centres = np.array([c.centroid for c in others + chosen], dtype=np.float64).reshape(-1, 3)
-        colours = np.array([_CLUSTER_RGBA] * len(others) + [_CHOSEN_RGBA] * len(chosen), np.uint8)
-        writer.write_colored_cloud(
-            topics.CENTROIDS, det.stamp_ns, centres, colours.reshape(-1, 4), frame_id
-        )
-        writer.write_scene_update(
-            topics.CLUSTERS,
-            det.stamp_ns,
-            chosen,
-            frame_id,
-            labels=[f"drone ({c.n_points} pts)" for c in chosen],
-            color=(0.1, 0.9, 0.2, 0.8),
-            entity_id="drone",
-        )
-
-    return write
-
-
 def annotate_log_locked(
     log: Path,
     *,
@@ -515,6 +379,7 @@ def annotate_log_locked(
     lidar: str | None = None,
     avia: str | None = None,
     truth: str | None = None,
+    model: LearnedModel | None = None,
     live: LiveOutput | None = None,
 ) -> AnnotateReport:
     """:func:`annotate_log` while holding an exclusive lock on the log (a second run refuses).
@@ -539,6 +404,7 @@ def annotate_log_locked(
             lidar=lidar,
             avia=avia,
             truth=truth,
+            model=model,
             live=live,
         )
 
@@ -555,6 +421,7 @@ def annotate_logs(
     lidar: str | None = None,
     avia: str | None = None,
     truth: str | None = None,
+    model: LearnedModel | None = None,
 ) -> tuple[list[AnnotateReport], list[tuple[Path, str]]]:
     """Annotate several logs, in parallel processes when ``workers > 1``.
 
@@ -571,6 +438,7 @@ def annotate_logs(
         force: rewrite read-only logs (their mode is kept).
         progress: one unit per frame (single worker) or per log (several).
         lidar, avia, truth: the topics to read in every log (as :func:`annotate_log`).
+        model: a model from ``cldet train`` (as :func:`annotate_log`).
 
     Returns:
         (reports of the logs done, in the order given; (log, error message) of those that failed).
@@ -594,6 +462,7 @@ def annotate_logs(
                     lidar=lidar,
                     avia=avia,
                     truth=truth,
+                    model=model,
                 )
             except CldetError as err:
                 failures.append((Path(log), str(err)))
@@ -616,6 +485,7 @@ def annotate_logs(
                 lidar=lidar,
                 avia=avia,
                 truth=truth,
+                model=model,
             ): i
             for i, log in enumerate(logs)
         }

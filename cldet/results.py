@@ -10,7 +10,8 @@ Three formats, all with a header line:
   quoted because of its commas), ``Classification`` an int. Read by :func:`read_results`,
   written by :func:`write_results`.
 - ``*_truth.csv`` (written by ``cldet simulate``): ``Sequence,Timestamp,x,y,z,class``. Read by
-  :func:`read_truth`.
+  :func:`read_truth`; the same rows come from a log's ``/ground_truth`` by
+  :func:`read_log_truth`.
 
 Rows are matched by :func:`row_key`: the normalised sequence name (``seq1`` and ``seq0001`` are
 the same sequence) and the stamp in integer nanoseconds (``1713163000.12`` and
@@ -31,9 +32,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from cldet.errors import CldetError, OutputExistsError, ResultsError
+from cldet.errors import CldetError, LogError, ResultsError
+from cldet.io import topics
 from cldet.io.files import atomic_path, resolve_link
-from cldet.stamps import parse_stamp
+from cldet.io.mcap_read import open_log
+from cldet.stamps import format_stamp, parse_stamp
 
 RESULTS_COLUMNS: tuple[str, ...] = ("Sequence", "Timestamp", "Position", "Classification")
 """The submission's columns, in order."""
@@ -339,12 +342,48 @@ def read_truth(path: Path | str) -> TruthTable:
     return TruthTable(source=str(path), rows=tuple(rows))
 
 
+def read_log_truth(path: Path | str) -> list[TruthRow]:
+    """The ground-truth rows of one log: ``/ground_truth`` positions, with ``/class`` if present.
+
+    Each row's class is the label at or before its stamp (the first label for earlier stamps);
+    ``None`` when the log has no ``/class`` channel. Timestamps are formatted with 6 decimals.
+
+    Raises:
+        LogError: the log cannot be read, has no sequence name or no ``/ground_truth`` messages.
+    """
+    with open_log(path) as log:
+        sequence, _split = log.source()
+        counts = log.list_topics()
+        if counts.get(topics.GROUND_TRUTH, 0) == 0:
+            listing = ", ".join(f"{t} ({n})" for t, n in counts.items()) or "none"
+            raise LogError(
+                f"{log.path}: no {topics.GROUND_TRUTH} messages (sequence {sequence}); "
+                f"topics in the file: {listing}"
+            )
+        truth = list(log.iter_positions(topics.GROUND_TRUTH))
+        labels = list(log.iter_classes(topics.CLASS)) if counts.get(topics.CLASS, 0) > 0 else []
+    label_ns = np.array([c.stamp_ns for c in labels], dtype=np.int64)
+    label_id = [c.class_id for c in labels]
+    rows = []
+    for sample in truth:
+        class_id = None
+        if label_id:
+            i = int(np.searchsorted(label_ns, sample.stamp_ns, side="right")) - 1
+            class_id = label_id[max(i, 0)]
+        x, y, z = (float(v) for v in sample.position)
+        rows.append(
+            TruthRow(sequence, format_stamp(sample.stamp_ns), sample.stamp_ns, (x, y, z), class_id)
+        )
+    return rows
+
+
 # --- writing -----------------------------------------------------------------------------------
 def write_atomic(path: Path | str, write: Callable[[Path], None], *, overwrite: bool) -> None:
     """Create ``path`` through a temporary file in the same folder, renamed into place at the end.
 
-    A crash or error never leaves a partial file and never damages an existing one; see
-    :func:`cldet.io.files.atomic_path` (mode from the umask, fsync, stale temporaries removed).
+    :func:`cldet.io.files.atomic_path` for a ``write(tmp)`` callback, with the CSV layer's errors:
+    a crash or error never leaves a partial file and never damages an existing one (mode from
+    the umask, fsync, stale temporaries removed).
 
     Args:
         path: the output file; its folder must exist.
@@ -356,10 +395,6 @@ def write_atomic(path: Path | str, write: Callable[[Path], None], *, overwrite: 
         ResultsError: the folder is missing or not writable.
     """
     target = Path(path)
-    if target.exists() and not overwrite:
-        raise OutputExistsError(
-            f"{target} already exists: pass overwrite (--overwrite) to replace it"
-        )
     if not resolve_link(target).parent.is_dir():
         raise ResultsError(f"{target}: the folder {target.parent} does not exist")
     try:

@@ -84,3 +84,13 @@ class Estimate:
     source: Source
     n_points: int  # points in the associated cluster (0 when not detected)
     sigma_m: float  # 1-sigma position uncertainty, metres
+
+
+@dataclass(frozen=True)
+class ClassEstimate:
+    """The drone type of a sequence as estimated from the evidence up to one instant."""
+
+    stamp_ns: int
+    class_id: int  # the most probable class
+    class_ids: tuple[int, ...]  # the classes the model knows
+    probabilities: tuple[float, ...]  # one per class id, summing to 1

@@ -16,7 +16,7 @@ position is in the Mid-360's frame (metres, z up):
 - ``world/truth/error``          a line from the truth to the estimate at the truth's stamps
 - ``world/truth/trajectory``     the ground-truth trajectory (static line strip)
 - ``plots/error_m``              3D distance estimate - truth at the truth stamps
-- ``drone/type``                 the drone type, when the results carry one (``cldet train``)
+- ``drone/type``                 the drone type, with a ``cldet train`` model (``/cldet/class``)
 - ``events``                     text log of track events (acquired, lost, re-acquired, predicted)
 
 The blueprint is sent when the recording closes, once what it holds is known: a 3D view whose
@@ -164,22 +164,16 @@ class TeeView:
                 view.abort()
 
 
-def drone_type_text(result: Any) -> str | None:
-    """The drone type line of a review, when the results carry a class; None otherwise.
-
-    The hook for ``cldet train``'s classifier: a ``drone_class`` attribute on the sequence's
-    result, either a class id or an object with ``class_id`` and optional ``probabilities``.
-    """
-    found = getattr(result, "drone_class", None)
-    if found is None:
+def drone_type_text(result: SequenceEstimate) -> str | None:
+    """The drone type line of a review: the last (final) ``/cldet/class`` estimate of a run with
+    a ``cldet train`` model, with its probability; None without one."""
+    if not result.classes:
         return None
-    class_id = getattr(found, "class_id", found)
-    if class_id is None:
-        return None
-    text = f"drone type {int(class_id)}"
-    probabilities = getattr(found, "probabilities", None)
-    if probabilities is not None and len(probabilities) > int(class_id) >= 0:
-        text += f" (p = {float(probabilities[int(class_id)]):.2f})"
+    final = result.classes[-1]
+    text = f"drone type {final.class_id}"
+    probabilities = dict(zip(final.class_ids, final.probabilities, strict=False))
+    if final.class_id in probabilities:
+        text += f" (p = {probabilities[final.class_id]:.2f})"
     return text
 
 

@@ -10,7 +10,8 @@ import pytest
 from cldet import explore
 from cldet.config import CldetConfig
 from cldet.core.background import FOREGROUND
-from cldet.core.estimator import estimate_sequence, fuse_points
+from cldet.core.estimator import fuse_points
+from cldet.core.methods import estimate_sequence
 from cldet.simulate import SequenceTruth, simulate_sequence
 from cldet.stamps import format_stamp
 from cldet.types import Estimate, LidarFrame, Source

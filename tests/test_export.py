@@ -12,9 +12,9 @@ from typer.testing import CliRunner
 import cldet.cli  # noqa: F401  (registers the commands)
 from cldet.commands._app import app
 from cldet.errors import LogError, OutputExistsError, ResultsError
-from cldet.export import FALLBACK_POSITION_M, export_results, read_log_track, read_log_truth
+from cldet.export import FALLBACK_POSITION_M, export_results, read_log_track
 from cldet.io import LogWriter, topics
-from cldet.results import read_results
+from cldet.results import read_log_truth, read_results
 from cldet.types import Estimate, Source
 
 T0 = 1_713_163_000_000_000_000  # test-split epoch, ns

@@ -499,3 +499,43 @@ def test_reading_one_topic_skips_chunks_without_it(
     with mcap_read.open_log(log) as reader:
         total = len(reader._summary.chunk_indexes)
     assert reading_clouds < total  # the image-only chunks were not opened for the clouds
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
+def test_own_chunk_reader_equals_the_mcap_library(tmp_path: Path, compression: str) -> None:
+    """The reference: mcap's reader and protobuf decode the same messages and the same points.
+
+    cldet keeps its own chunk parser and protobuf walker because they are faster (see
+    benchmarks/bench_libraries.py); this holds them to the library, on a log with two chunk runs
+    (the sources, then results appended by a rewrite).
+    """
+    from cldet.io.rewrite import rewrite_log
+
+    source, path = tmp_path / "source.mcap", tmp_path / "annotated.mcap"
+    with open(source, "wb") as f:
+        written = write_sample_log(f, compression)
+    extra = [
+        (T0 + i * 50_000_000, lambda w, i=i: w.write_class("/cldet/class", T0 + i * 50_000_000, i))
+        for i in range(6)
+    ]
+    rewrite_log(source, path, extra)
+    with open(path, "rb") as f:
+        reference = [
+            (channel.topic, message.log_time, bytes(message.data))
+            for _, channel, message in make_reader(f).iter_messages()
+        ]
+    with open_log(path) as log:
+        ours = [(c.topic, m.log_time, bytes(m.data)) for _, c, m in log.iter_messages()]
+        clouds = list(log.iter_clouds(tp.LIDAR_360))
+    assert [t for _, t, _ in ours] == sorted(t for _, t, _ in ours)  # in log-time order
+    kept = sum(n for topic, n in written["counts"].items() if not topic.startswith("/cldet/"))
+    assert sorted(ours) == sorted(reference) and len(ours) == kept + 6  # earlier /cldet/ dropped
+    expected = [
+        (t, np.frombuffer(PointCloud.FromString(d).data, dtype=np.float32).reshape(-1, 3))
+        for topic, t, d in reference
+        if topic == tp.LIDAR_360
+    ]
+    assert len(clouds) == len(expected) == len(written["clouds"])
+    for cloud, (stamp, points) in zip(clouds, expected, strict=True):
+        assert cloud.stamp_ns == stamp
+        np.testing.assert_array_equal(cloud.points, points)

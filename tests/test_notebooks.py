@@ -28,6 +28,7 @@ def test_the_notebooks_exist() -> None:
         "01_dataset_tour.ipynb",
         "02_clustering_study.ipynb",
         "03_tracking_and_errors.ipynb",
+        "04_drone_types.ipynb",
     ]
 
 

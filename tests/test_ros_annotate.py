@@ -117,7 +117,7 @@ def test_the_avia_is_moved_into_the_lidar_frame_by_tf_static(tmp_path: Path) -> 
 def test_without_tf_static_the_configured_avia_extrinsic_applies(tmp_path: Path) -> None:
     from cldet.config import load_config
     from cldet.io.sources import SensorTopics
-    from cldet.pipeline import _frames
+    from cldet.pipeline import read_frames
 
     rng = np.random.default_rng(2)
     lidar, avia = _points(rng), _points(rng)
@@ -129,12 +129,12 @@ def test_without_tf_static_the_configured_avia_extrinsic_applies(tmp_path: Path)
     turned = load_config(
         overrides={"frames": {"avia_xyz_m": (1.0, 2.0, 3.0), "avia_rpy_deg": (0.0, 0.0, 90.0)}}
     )
-    (frame,) = _frames(log, sensors, turned.frames)
+    (frame,) = read_frames(log, sensors, turned.frames)
     expected = np.column_stack([-avia[:, 1] + 1.0, avia[:, 0] + 2.0, avia[:, 2] + 3.0])
     np.testing.assert_allclose(frame.avia, expected, atol=1e-5)
     np.testing.assert_array_equal(frame.mid360, lidar)
     # the default: the challenge's layout, the Avia already in the LiDAR's frame
-    (frame,) = _frames(log, sensors, load_config().frames)
+    (frame,) = read_frames(log, sensors, load_config().frames)
     np.testing.assert_array_equal(frame.avia, avia)
 
 

@@ -143,3 +143,16 @@ def test_property_finite_shape_and_samples_reproduced(
     inside = (query >= stamps.min()) & (query <= stamps.max())
     assert np.all(got[inside] >= positions.min(axis=0) - 1e-9)
     assert np.all(got[inside] <= positions.max(axis=0) + 1e-9)
+
+
+def test_trajectory_errors_are_distances_to_the_reference_at_each_stamp() -> None:
+    from cldet.core.trajectory import rms, trajectory_errors
+
+    ref_ns = EPOCH_NS + np.arange(0, 5) * 100_000_000
+    query = EPOCH_NS + np.array([50_000_000, 250_000_000, 700_000_000])  # the last one outside
+    offset = np.array([0.3, 0.0, 0.4])  # 0.5 m
+    errors = trajectory_errors(query, line(query) + offset, ref_ns, line(ref_ns))
+    np.testing.assert_allclose(errors, 0.5, atol=1e-9)
+    assert trajectory_errors([], np.zeros((0, 3)), ref_ns, line(ref_ns)).shape == (0,)
+    assert rms([3.0, 4.0]) == pytest.approx(np.sqrt(12.5))
+    assert np.isnan(rms([]))

@@ -23,7 +23,7 @@ from cldet.io import topics
 from cldet.io.mcap_write import LogWriter
 from cldet.io.transforms import sensor_tree, tree_problem
 from cldet.pipeline import annotate_log
-from cldet.types import Cluster, Estimate, LidarFrame, Source
+from cldet.types import ClassEstimate, Cluster, Estimate, LidarFrame, Source
 from cldet.view import (
     MIN_BOX_HALF_M,
     NOISE_CLASS,
@@ -227,11 +227,12 @@ def test_boxes_have_a_minimum_size() -> None:
 def test_drone_type_text_is_shown_only_when_the_results_carry_a_class() -> None:
     plain = SequenceEstimate(estimates=(), chosen={}, events=())
     assert drone_type_text(plain) is None
-
-    class WithClass:
-        drone_class = type("C", (), {"class_id": 2, "probabilities": [0.1, 0.1, 0.7, 0.1]})()
-
-    assert drone_type_text(WithClass()) == "drone type 2 (p = 0.70)"
+    classes = (
+        ClassEstimate(1, 0, (0, 1, 2, 3), (0.4, 0.3, 0.2, 0.1)),
+        ClassEstimate(2, 2, (0, 1, 2, 3), (0.1, 0.1, 0.7, 0.1)),  # the final one
+    )
+    with_class = SequenceEstimate(estimates=(), chosen={}, events=(), classes=classes)
+    assert drone_type_text(with_class) == "drone type 2 (p = 0.70)"
 
 
 def _entity_paths(rrd: Path) -> set[str]:

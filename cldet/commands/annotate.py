@@ -90,6 +90,16 @@ def annotate(
             "reported error. Default: /ground_truth when present.",
         ),
     ] = None,
+    model: Annotated[
+        Path | None,
+        typer.Option(
+            "--model",
+            metavar="MODEL",
+            help="A model from `cldet train`: its learned scorer picks the drone's tracks, its "
+            "scan-time offset and bias replace the configuration's, and the drone type goes on "
+            "/cldet/class. Default: the hand-set scorer, no type.",
+        ),
+    ] = None,
     live: Annotated[
         bool,
         typer.Option(
@@ -129,10 +139,12 @@ def annotate(
     Each log is rewritten in place: its data is copied byte for byte into a temporary file (no
     decompression), the results are appended, and the file is renamed over the log when complete;
     an earlier annotation is replaced. New channels:
-    /cldet/estimate, /cldet/causal, /cldet/pose, /cldet/trajectory, /cldet/clusters,
-    /cldet/foreground, and point-cloud copies Rerun draws too (/cldet/drone, /cldet/track,
-    /cldet/truth_track, /cldet/centroids), a /tf frame tree when the log has none, and a
-    `cldet.config` metadata record with the method and effective configuration.
+    /cldet/estimate, /cldet/pose, /cldet/trajectory, /cldet/clusters, /cldet/foreground,
+    /cldet/causal (the per-frame estimate as a live run makes it), /cldet/class with --model
+    (the drone type and its probabilities, updated every second), point-cloud copies Rerun
+    draws too (/cldet/drone, /cldet/track, /cldet/truth_track, /cldet/centroids), a /tf frame
+    tree when the log has none, and a `cldet.config` metadata record with the method and
+    effective configuration.
 
     ROS 2 recordings (`ros2 bag record` writes MCAP) are read as they are: name the topics,
     e.g. `cldet annotate rec.mcap --lidar /livox/lidar --avia /livox/avia`. Each frame is dated
@@ -149,12 +161,16 @@ def annotate(
     """
     from cldet.config import load_config
     from cldet.errors import CldetError
+    from cldet.modelfile import load_model
     from cldet.pipeline import annotate_log_locked, annotate_logs
     from cldet.progress import BarProgress
 
     with handled():
         overrides = {"method": method.value} if method is not None else None
         cfg = load_config(config, overrides=overrides)
+        learned = load_model(model) if model is not None else None
+        if learned is not None and cfg.method != "track":
+            raise CldetError(f"--model goes with the track method, not {cfg.method}")
         if (output is not None or rrd is not None) and len(logs) != 1:
             raise CldetError("-o/--output and --rrd go with exactly one log")
         if not live and (realtime or connect or no_rerun or foxglove is not None):
@@ -170,6 +186,7 @@ def annotate(
                 lidar=lidar,
                 avia=avia,
                 truth=truth,
+                model=learned,
                 realtime=realtime,
                 rerun=None if no_rerun else (connect or "spawn"),
                 foxglove=foxglove,
@@ -188,6 +205,7 @@ def annotate(
                     lidar=lidar,
                     avia=avia,
                     truth=truth,
+                    model=learned,
                 )
                 reports, failures = [report], list[tuple[Path, str]]()
             else:
@@ -201,6 +219,7 @@ def annotate(
                     lidar=lidar,
                     avia=avia,
                     truth=truth,
+                    model=learned,
                 )
         for report in reports:
             typer.echo(report.describe())

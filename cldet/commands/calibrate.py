@@ -21,7 +21,11 @@ def calibrate(
     ] = Path("bias.yaml"),
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
 ) -> None:
-    """Fit the bias correction (along the sensor ray, and in z) from training ground truth.
+    """Fit only the bias correction (along the sensor ray, and in z) from training ground truth.
+
+    `cldet train` fits the same correction and more (timing, track scorer, drone type) by
+    running the estimator itself; calibrate is the light way when the training logs are already
+    annotated, or for the cl-det method: no re-run, no scikit-learn model, a YAML file.
 
     The LiDAR sees only the near face of the drone and the truth is a prism above it, so
     detected centroids sit nearer the sensor and lower than the truth. This fits the two offsets

@@ -15,10 +15,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cldet.config import BiasConfig
+from cldet.core.trajectory import evaluate_trajectory
 from cldet.errors import CldetError
 from cldet.types import Estimate, PositionSample, Source
 
-__all__ = ["apply_bias", "fit_bias", "fit_bias_sequences"]
+__all__ = ["apply_bias", "detection_pairs", "fit_bias", "fit_bias_sequences"]
 
 _RIDGE = 1e-3  # relative ridge weight of the least-squares fit
 _OUTLIER_M = 1.0  # pairs farther apart than this after the fit are refitted without
@@ -40,32 +41,36 @@ def apply_bias(positions: NDArray[np.floating], bias: BiasConfig) -> NDArray[np.
     return out
 
 
-def _pairs(
-    detections: Sequence[Estimate], truth: Sequence[PositionSample], max_truth_gap_ns: int
-) -> tuple[list[NDArray[np.float64]], list[NDArray[np.float64]]]:
-    """(detected position, interpolated truth) pairs of one sequence."""
-    used_p: list[NDArray[np.float64]] = []
-    used_t: list[NDArray[np.float64]] = []
-    if not truth:
-        return used_p, used_t
-    t_ns = np.array([s.stamp_ns for s in truth], dtype=np.int64)
-    order = np.argsort(t_ns, kind="stable")
-    t_ns = t_ns[order]
-    t_pos = np.array([truth[i].position for i in order], dtype=np.float64)
-    for est in detections:
-        if est.source != Source.DETECTED:
-            continue
-        k = int(np.searchsorted(t_ns, est.stamp_ns))
-        if k < len(t_ns) and t_ns[k] == est.stamp_ns:
-            used_p.append(np.asarray(est.position, dtype=np.float64))
-            used_t.append(t_pos[k])
-            continue
-        if k == 0 or k == len(t_ns) or t_ns[k] - t_ns[k - 1] > max_truth_gap_ns:
-            continue
-        w = (est.stamp_ns - t_ns[k - 1]) / (t_ns[k] - t_ns[k - 1])
-        used_p.append(np.asarray(est.position, dtype=np.float64))
-        used_t.append((1 - w) * t_pos[k - 1] + w * t_pos[k])
-    return used_p, used_t
+def detection_pairs(
+    detections: Sequence[Estimate],
+    truth: Sequence[PositionSample],
+    max_truth_gap_ns: int | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The detected positions of one sequence and the truth at their stamps, (N,3) each.
+
+    Only estimates with ``source == DETECTED`` inside the truth's span count; the truth is
+    interpolated linearly (:func:`cldet.core.trajectory.evaluate_trajectory`). With
+    ``max_truth_gap_ns``, a detection between two truth samples further apart than that is
+    skipped (one at a truth sample's stamp never is).
+    """
+    det = [e for e in detections if e.source == Source.DETECTED]
+    if not truth or not det:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    t_ns = np.sort(np.array([s.stamp_ns for s in truth], dtype=np.int64))
+    stamps = np.array([e.stamp_ns for e in det], dtype=np.int64)
+    keep = (stamps >= t_ns[0]) & (stamps <= t_ns[-1])
+    if max_truth_gap_ns is not None:
+        k = np.searchsorted(t_ns, stamps)
+        exact = (k < len(t_ns)) & (t_ns[np.minimum(k, len(t_ns) - 1)] == stamps)
+        gap = t_ns[np.clip(k, 1, len(t_ns) - 1)] - t_ns[np.clip(k - 1, 0, len(t_ns) - 1)]
+        keep &= exact | (gap <= max_truth_gap_ns)
+    positions = np.array([e.position for e in det], dtype=np.float64).reshape(-1, 3)[keep]
+    if not keep.any():
+        return positions, np.zeros((0, 3))
+    true = evaluate_trajectory(
+        [s.stamp_ns for s in truth], [s.position for s in truth], stamps[keep]
+    )
+    return positions, true
 
 
 def fit_bias(
@@ -103,18 +108,19 @@ def fit_bias_sequences(
     Raises:
         CldetError: fewer than two usable detection/truth pairs.
     """
-    used_p: list[NDArray[np.float64]] = []
-    used_t: list[NDArray[np.float64]] = []
+    used_p: list[NDArray[np.float64]] = [np.zeros((0, 3))]
+    used_t: list[NDArray[np.float64]] = [np.zeros((0, 3))]
     for detections, truth in sequences:
-        p_seq, t_seq = _pairs(detections, truth, max_truth_gap_ns)
-        used_p += p_seq
-        used_t += t_seq
-    if len(used_p) < 2:
+        p_seq, t_seq = detection_pairs(detections, truth, max_truth_gap_ns)
+        used_p.append(p_seq)
+        used_t.append(t_seq)
+    n_pairs = sum(len(p) for p in used_p)
+    if n_pairs < 2:
         raise CldetError(
-            f"fit_bias: only {len(used_p)} detected estimate(s) overlap the ground truth, need >= 2"
+            f"fit_bias: only {n_pairs} detected estimate(s) overlap the ground truth, need >= 2"
         )
-    p = np.asarray(used_p, dtype=np.float64)
-    residual = np.asarray(used_t) - p  # (N,3)
+    p = np.concatenate(used_p)
+    residual = np.concatenate(used_t) - p  # (N,3)
     u = _unit_rays(p)
     design = np.zeros((3 * len(p), 2))
     design[:, 0] = u.ravel()

@@ -45,7 +45,7 @@ FALLBACK (no track at all). ``sigma_m`` is the per-axis 1-sigma position uncerta
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Protocol
 
@@ -57,8 +57,10 @@ from cldet.config import CldetConfig, TrackingConfig
 from cldet.core.background import FOREGROUND, MARGIN, BackgroundModel
 from cldet.core.bias import apply_bias
 from cldet.core.clustering import cluster_points, summarize_clusters
+from cldet.core.features import FEATURE_NAMES, track_detections, track_features
 from cldet.core.frames import valid_points
 from cldet.core.lines import find_lines
+from cldet.core.model import LearnedModel
 from cldet.core.selection import (
     FIXED_JUDGE_S,
     FIXED_MEAN_HITS,
@@ -68,10 +70,16 @@ from cldet.core.selection import (
     select_chain,
 )
 from cldet.core.smoothing import extrapolate, rts_smooth
-from cldet.core.tracking import ActiveTracks, CandidateTracker, ClusterTable, cross_section
+from cldet.core.tracking import (
+    ActiveTracks,
+    CandidateTracker,
+    ClusterTable,
+    TrackRecord,
+    cross_section,
+)
 from cldet.errors import FrameOrderError
 from cldet.stamps import NS_PER_S
-from cldet.types import Cluster, Estimate, LidarFrame, Source
+from cldet.types import ClassEstimate, Cluster, Estimate, LidarFrame, Source
 
 __all__ = [
     "Estimator",
@@ -79,9 +87,7 @@ __all__ = [
     "SequenceEstimate",
     "TrackEstimator",
     "TrackEvent",
-    "estimate_sequence",
     "fuse_points",
-    "make_estimator",
 ]
 
 _LOST_AFTER_S = 0.5  # a gap without detection longer than this is reported as lost/reacquired
@@ -117,6 +123,17 @@ class SequenceEstimate:
     chosen: dict[int, int]  # stamp_ns -> cluster_id chosen in that frame (absent when none)
     events: tuple[TrackEvent, ...]
     causal: tuple[Estimate, ...] = ()  # the causal estimate of every frame, as it was made
+    classes: tuple[ClassEstimate, ...] = ()  # the drone type as evidence grew (with a model)
+
+
+@dataclass(frozen=True)
+class Candidates:
+    """What ``refine`` chooses from: every candidate track and the frames' cluster tables."""
+
+    records: list[TrackRecord]  # the tracker's tracks and the line search's
+    tables: list[ClusterTable]  # one per frame
+    times_s: NDArray[np.float64]  # (F,) each frame's observation time, s from the first stamp
+    stamps_ns: NDArray[np.int64]  # (F,)
 
 
 class Estimator(Protocol):
@@ -216,8 +233,10 @@ class TrackEstimator:
 
     name = "track"
 
-    def __init__(self, config: CldetConfig) -> None:
+    def __init__(self, config: CldetConfig, model: LearnedModel | None = None) -> None:
         self.config = config
+        self.model = model  # learned scorer and type classifier (None: the hand-set defaults)
+        self._candidates: Candidates | None = None
         self.background = BackgroundModel(config.background)
         self._tracker = CandidateTracker(config.tracking)
         self._stamps: list[int] = []
@@ -485,96 +504,182 @@ class TrackEstimator:
         return Estimate(stamp_ns, pos, Source.FALLBACK, 0, 1e3)
 
     # ------------------------------------------------------------------ refine
-    def refine(self) -> SequenceEstimate:
-        """Select the drone's chain of tracks over the whole sequence, smooth, extrapolate."""
-        cfg = self.config
+    def candidates(self) -> Candidates:
+        """Every candidate track after the last frame: the tracker's and the line search's."""
         n = len(self._stamps)
+        if self._candidates is None or len(self._candidates.tables) != n:
+            t_s = self._times[:n].copy()  # observation times (stamp + scan offset)
+            records = self._tracker.records()
+            first_id = records[-1].track_id + 1 if records else 0
+            if n:
+                records += find_lines(
+                    self._tables, t_s, self.config.tracking, first_id, self._offset_s
+                )
+            stamps = np.asarray(self._stamps, dtype=np.int64)
+            self._candidates = Candidates(records, list(self._tables), t_s, stamps)
+        return self._candidates
+
+    def refine(self, model: LearnedModel | None = None) -> SequenceEstimate:
+        """Select the drone's chain of tracks over the whole sequence, smooth, extrapolate;
+        with a model (``model``, else the estimator's) score tracks and type the drone with it."""
         causal = tuple(self._causal)
-        if n == 0:
+        if not self._stamps:
             return SequenceEstimate((), {}, (), causal)
-        stamps = np.asarray(self._stamps, dtype=np.int64)
-        t_s = self._times[:n].copy()  # observation times (stamp + scan offset)
-        tc = cfg.tracking
-        records = self._tracker.records()
-        first_id = records[-1].track_id + 1 if records else 0
-        records += find_lines(self._tables, t_s, tc, first_id, self._offset_s)
-        scored = score_tracks(records, self._tables, t_s, tc)
-        chain = select_chain(scored, tc)
-        if not chain:
-            pos = np.asarray(tc.fallback_position, dtype=np.float64)
-            est = tuple(Estimate(int(s), pos.copy(), Source.FALLBACK, 0, 1e3) for s in stamps)
-            ev = TrackEvent(int(stamps[0]), "lost", "no candidate track: fallback position")
-            return SequenceEstimate(est, {}, (ev,), causal)
+        model = model if model is not None else self.model
+        return replace(refine_candidates(self.candidates(), self.config, model), causal=causal)
 
-        z = np.full((n, 3), np.nan)
-        sigma = np.full(n, tc.meas_sigma_m)
-        n_points = np.zeros(n, dtype=np.int64)
-        chosen: dict[int, int] = {}
-        raw = np.zeros(n, dtype=bool)
-        events: list[TrackEvent] = []
-        for k, (tr, i0, i1) in enumerate(chain):
-            rec = tr.record
-            for h in range(i0, i1):
-                f, c = int(rec.frames[h]), int(rec.clusters[h])
-                z[f] = rec.positions[h]
-                n_points[f] = int(rec.n_points[h])
-                if c >= 0:
-                    chosen[int(stamps[f])] = c
-                else:
-                    raw[f] = True
-                    sigma[f] = tc.raw_meas_sigma_m
-            if k > 0:
-                events.append(
-                    TrackEvent(
-                        int(stamps[rec.frames[i0]]),
-                        "switched",
-                        f"drone track continues as candidate {rec.track_id} (score {tr.score:.1f})",
-                    )
-                )
-        have = np.all(np.isfinite(z), axis=1)
-        idx = np.flatnonzero(have)
-        first, last = int(idx[0]), int(idx[-1])
-        seg = slice(first, last + 1)
-        sm = rts_smooth(t_s[seg], z[seg], sigma[seg], cfg.smoothing.accel_psd, tc.init_speed_sigma)
-        pos = np.zeros((n, 3))
-        var = np.zeros(n)
-        # the smoother's states are at the points' time: move them back to the stamps
-        pos[seg] = sm.position - sm.velocity * self._offset_s
-        var[seg] = sm.pos_var
-        q = cfg.smoothing.accel_psd
-        for f in list(range(first)) + list(range(last + 1, n)):
-            k_end = 0 if f < first else -1
-            dt = t_s[f] - t_s[first if f < first else last] - self._offset_s
-            pos[f], var[f] = extrapolate(
-                sm.position[k_end],
-                sm.velocity[k_end],
-                sm.cov[k_end],
-                dt,
-                q,
-                cfg.smoothing.extrapolation_tau_s,
-            )
-        pos = apply_bias(pos, cfg.bias)
 
-        estimates = []
-        for f in range(n):
-            if have[f]:
-                source = Source.DETECTED
-            elif first < f < last:
-                source = Source.SMOOTHED
+def refine_candidates(
+    cand: Candidates, cfg: CldetConfig, model: LearnedModel | None = None
+) -> SequenceEstimate:
+    """The refined track of a sequence from its candidates (see the module docstring); without
+    the causal estimates, which only the per-frame pass makes."""
+    n = len(cand.stamps_ns)
+    offset_s = cfg.frames.scan_offset_s
+    stamps, t_s = cand.stamps_ns, cand.times_s
+    tc = cfg.tracking
+    scorer = model.drone_probability if model is not None and model.scorer is not None else None
+    scored = score_tracks(cand.records, cand.tables, t_s, tc, scorer)
+    chain = select_chain(scored, tc)
+    if not chain:
+        pos = np.asarray(tc.fallback_position, dtype=np.float64)
+        est = tuple(Estimate(int(s), pos.copy(), Source.FALLBACK, 0, 1e3) for s in stamps)
+        ev = TrackEvent(int(stamps[0]), "lost", "no candidate track: fallback position")
+        return SequenceEstimate(est, {}, (ev,))
+
+    z = np.full((n, 3), np.nan)
+    sigma = np.full(n, tc.meas_sigma_m)
+    n_points = np.zeros(n, dtype=np.int64)
+    chosen: dict[int, int] = {}
+    raw = np.zeros(n, dtype=bool)
+    events: list[TrackEvent] = []
+    for k, (tr, i0, i1) in enumerate(chain):
+        rec = tr.record
+        for h in range(i0, i1):
+            f, c = int(rec.frames[h]), int(rec.clusters[h])
+            z[f] = rec.positions[h]
+            n_points[f] = int(rec.n_points[h])
+            if c >= 0:
+                chosen[int(stamps[f])] = c
             else:
-                source = Source.PREDICTED
-            estimates.append(
-                Estimate(
-                    stamp_ns=int(stamps[f]),
-                    position=pos[f],
-                    source=source,
-                    n_points=int(n_points[f]) if have[f] else 0,
-                    sigma_m=float(np.sqrt(max(var[f], 0.0))),
+                raw[f] = True
+                sigma[f] = tc.raw_meas_sigma_m
+        if k > 0:
+            events.append(
+                TrackEvent(
+                    int(stamps[rec.frames[i0]]),
+                    "switched",
+                    f"drone track continues as candidate {rec.track_id} (score {tr.score:.1f})",
                 )
             )
-        events.extend(_gap_events(stamps, t_s, have, raw, first, last, chain))
-        events.sort(key=lambda e: e.stamp_ns)
-        return SequenceEstimate(tuple(estimates), chosen, tuple(events), causal)
+    have = np.all(np.isfinite(z), axis=1)
+    idx = np.flatnonzero(have)
+    first, last = int(idx[0]), int(idx[-1])
+    seg = slice(first, last + 1)
+    sm = rts_smooth(t_s[seg], z[seg], sigma[seg], cfg.smoothing.accel_psd, tc.init_speed_sigma)
+    pos = np.zeros((n, 3))
+    var = np.zeros(n)
+    # the smoother's states are at the points' time: move them back to the stamps
+    pos[seg] = sm.position - sm.velocity * offset_s
+    var[seg] = sm.pos_var
+    q = cfg.smoothing.accel_psd
+    for f in list(range(first)) + list(range(last + 1, n)):
+        k_end = 0 if f < first else -1
+        dt = t_s[f] - t_s[first if f < first else last] - offset_s
+        pos[f], var[f] = extrapolate(
+            sm.position[k_end],
+            sm.velocity[k_end],
+            sm.cov[k_end],
+            dt,
+            q,
+            cfg.smoothing.extrapolation_tau_s,
+        )
+    pos = apply_bias(pos, cfg.bias)
+
+    estimates = []
+    for f in range(n):
+        if have[f]:
+            source = Source.DETECTED
+        elif first < f < last:
+            source = Source.SMOOTHED
+        else:
+            source = Source.PREDICTED
+        estimates.append(
+            Estimate(
+                stamp_ns=int(stamps[f]),
+                position=pos[f],
+                source=source,
+                n_points=int(n_points[f]) if have[f] else 0,
+                sigma_m=float(np.sqrt(max(var[f], 0.0))),
+            )
+        )
+    events.extend(_gap_events(stamps, t_s, have, raw, first, last, chain))
+    events.sort(key=lambda e: e.stamp_ns)
+    classes = () if model is None else _classify(model, chain, cand, tc)
+    return SequenceEstimate(tuple(estimates), chosen, tuple(events), classes=classes)
+
+
+CLASS_EVERY_S = 1.0
+"""A sequence's drone type is re-estimated every this many seconds as its evidence grows."""
+
+
+def chain_type_features(
+    chain: list[tuple[ScoredTrack, int, int]],
+    cand: Candidates,
+    cfg: TrackingConfig,
+    until_s: Sequence[float] = (np.inf,),
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """The chain's tracks over their detections up to each time of ``until_s``: features
+    (T, F), each one's weight in the vote (T,: the detections it gave the chain) and the index
+    of its time in ``until_s`` (T,)."""
+    parts = [(tr, i0, i1, track_detections(tr.record, cand.tables, cfg)) for tr, i0, i1 in chain]
+    feats, weights, groups = [], [], []
+    for g, t in enumerate(until_s):
+        for tr, i0, i1, det in parts:
+            upto = min(i1, int(np.searchsorted(tr.times_s, t, side="right")))
+            if upto - i0 < 1 or upto < 2:
+                continue
+            feats.append(track_features(tr.record, det, tr.times_s, upto))
+            weights.append(float(upto - i0))
+            groups.append(g)
+    return (
+        np.array(feats).reshape(-1, len(FEATURE_NAMES)),
+        np.array(weights, dtype=np.float64),
+        np.array(groups, dtype=np.int64),
+    )
+
+
+def _classify(
+    model: LearnedModel,
+    chain: list[tuple[ScoredTrack, int, int]],
+    cand: Candidates,
+    cfg: TrackingConfig,
+) -> tuple[ClassEstimate, ...]:
+    """The drone type every ``CLASS_EVERY_S`` from the chain's evidence so far, and at the end."""
+    if model.typer is None:
+        return ()
+    t_s, stamps = cand.times_s, cand.stamps_ns
+    ticks = np.arange(t_s[0], t_s[-1], CLASS_EVERY_S) + CLASS_EVERY_S
+    marks = sorted({int(i) for i in np.searchsorted(t_s, ticks)} | {len(t_s) - 1})
+    marks = [m for m in marks if m < len(t_s)]
+    feats, weights, groups = chain_type_features(chain, cand, cfg, [t_s[f] for f in marks])
+    if len(groups) == 0:
+        return ()
+    proba = model.type_probabilities(feats, weights, groups)
+    seen = np.zeros(len(marks), dtype=bool)
+    seen[groups] = True
+    out = []
+    for g in np.flatnonzero(seen):
+        p = proba[g]
+        out.append(
+            ClassEstimate(
+                int(stamps[marks[g]]),
+                model.class_ids[int(np.argmax(p))],
+                tuple(model.class_ids),
+                tuple(float(v) for v in p),
+            )
+        )
+    return tuple(out)
 
 
 def _gap_events(
@@ -627,27 +732,3 @@ def _gap_events(
             )
         )
     return out
-
-
-def make_estimator(config: CldetConfig) -> Estimator:
-    """The estimator the configuration's ``method`` names."""
-    if config.method == "track":
-        return TrackEstimator(config)
-    if config.method == "cl-det":
-        from cldet.core.cldet_baseline import ClDetEstimator
-
-        return ClDetEstimator(config)
-    raise ValueError(f"unknown method {config.method!r}")  # unreachable: validated by config
-
-
-def estimate_sequence(
-    frames: Callable[[], Iterable[LidarFrame]] | Iterable[LidarFrame], config: CldetConfig
-) -> tuple[list[FrameDetections], SequenceEstimate]:
-    """Register every frame of a sequence (one pass, in stamp order), then refine.
-
-    ``frames`` is an iterable of frames, or a callable returning one (called once).
-    """
-    estimator = make_estimator(config)
-    source = frames() if callable(frames) else frames
-    detections = [estimator.register_frame(frame) for frame in source]
-    return detections, estimator.refine()

@@ -57,6 +57,11 @@ class ClusterTable:
     height: NDArray[np.float64] | None = (
         None  # (K,) lowest point above local ground, m; NaN unknown
     )
+    size: NDArray[np.float64] | None = None  # (K,3) box edges along x, y, z, metres
+
+    def sizes(self) -> NDArray[np.float64]:
+        """(K,3) each cluster's box edges (x, y, z), metres (NaN: unknown)."""
+        return np.full((len(self), 3), np.nan) if self.size is None else self.size
 
     def heights(self) -> NDArray[np.float64]:
         """(K,) each cluster's height above the local ground, metres (NaN: unknown)."""
@@ -69,12 +74,14 @@ class ClusterTable:
         if k == 0:
             z = np.zeros(0, dtype=np.int64)
             return ClusterTable(np.zeros((0, 3)), np.zeros(0), z, z, z)
+        size = np.array([c.upper - c.lower for c in clusters], dtype=np.float64)
         return ClusterTable(
             centroid=np.array([c.centroid for c in clusters], dtype=np.float64),
-            extent=np.array([float(np.max(c.upper - c.lower)) for c in clusters]),
+            extent=size.max(axis=1),
             n_points=np.array([c.n_points for c in clusters], dtype=np.int64),
             n_mid360=np.array([c.n_mid360 for c in clusters], dtype=np.int64),
             n_avia=np.array([c.n_avia for c in clusters], dtype=np.int64),
+            size=size,
         )
 
     def __len__(self) -> int:

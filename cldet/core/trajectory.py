@@ -104,6 +104,40 @@ def evaluate_trajectory(
     return out
 
 
+def trajectory_errors(
+    stamps_ns: ArrayLike,
+    positions: ArrayLike,
+    reference_stamps_ns: ArrayLike,
+    reference_positions: ArrayLike,
+) -> NDArray[np.float64]:
+    """3D distance of each position to a reference trajectory evaluated at its stamp.
+
+    The one error against a trajectory (the truth, or an estimate): the reference is evaluated
+    by :func:`evaluate_trajectory` (linear inside, its own motion outside).
+
+    Args:
+        stamps_ns: (N,) integer ns; N may be 0.
+        positions: (N, 3) metres.
+        reference_stamps_ns: (K,) integer ns, K >= 1.
+        reference_positions: (K, 3) metres.
+
+    Returns:
+        (N,) metres.
+    """
+    stamps = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
+    pos = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if stamps.size == 0:
+        return np.zeros(0)
+    reference = evaluate_trajectory(reference_stamps_ns, reference_positions, stamps)
+    return np.asarray(np.linalg.norm(pos - reference, axis=1), dtype=np.float64)
+
+
+def rms(errors: ArrayLike) -> float:
+    """Root mean square of ``errors`` (metres); NaN when there is none."""
+    e = np.asarray(errors, dtype=np.float64)
+    return float(np.sqrt(np.mean(e**2))) if e.size else float("nan")
+
+
 def _sorted_unique(
     stamps: NDArray[np.int64], pos: NDArray[np.float64]
 ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:

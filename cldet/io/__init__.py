@@ -6,6 +6,7 @@ message's log time, publish time and own ``timestamp`` are the same number.
 
 from __future__ import annotations
 
+from cldet.io.files import atomic_output
 from cldet.io.mcap_read import (
     LogReader,
     decode_cloud,
@@ -18,7 +19,7 @@ from cldet.io.mcap_read import (
     open_log,
     read_metadata,
 )
-from cldet.io.mcap_write import Compression, LogWriter, atomic_output, png_size
+from cldet.io.mcap_write import Compression, LogWriter, png_size
 
 __all__ = [
     "Compression",

@@ -15,7 +15,7 @@ import heapq
 import os
 import struct
 import zlib
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
@@ -45,13 +45,13 @@ from numpy.typing import NDArray
 
 from cldet.errors import CorruptMessageError, LogError
 from cldet.io import topics
-from cldet.io.mcap_append import AppendPlan, copy_prefix, plan_append
-from cldet.io.schemas import ClassLabel
+from cldet.io.schemas import ClassEstimateMessage, ClassLabel
 from cldet.io.schemas import Estimate as EstimateMessage
 from cldet.stamps import NS_PER_S, format_stamp
-from cldet.types import ClassSample, Cloud, Estimate, PositionSample, Source
+from cldet.types import ClassEstimate, ClassSample, Cloud, Estimate, PositionSample, Source
 
 __all__ = [
+    "CORRUPT_ERRORS",
     "LogReader",
     "decode_cloud",
     "decode_xyz",
@@ -67,9 +67,7 @@ __all__ = [
 
 _DATA_FIELD = 6  # foxglove.PointCloud.data
 
-# What corrupt bytes raise in the mcap library, protobuf, the decompressors and this module's
-# own parsers (lz4.frame raises RuntimeError on a bad frame). Anything else is a bug: not caught.
-_CORRUPT: tuple[type[BaseException], ...] = (
+CORRUPT_ERRORS: tuple[type[BaseException], ...] = (
     McapError,
     DecodeError,
     ValueError,  # also UnicodeDecodeError, mcap's CRCValidationError
@@ -81,9 +79,12 @@ _CORRUPT: tuple[type[BaseException], ...] = (
     zstandard.ZstdError,
     RuntimeError,
 )
+"""What corrupt bytes raise in the mcap library, protobuf, the decompressors and this module's
+own parsers (lz4.frame raises RuntimeError on a bad frame); anything else is a bug, not caught.
+Readers of other formats inside a log (:mod:`cldet.io.sources`) extend it."""
 
 # ... and a seek before the start of a short file, a read that fails.
-_UNREADABLE: tuple[type[BaseException], ...] = (*_CORRUPT, OSError)
+_UNREADABLE: tuple[type[BaseException], ...] = (*CORRUPT_ERRORS, OSError)
 
 
 def _reason(err: BaseException) -> str:
@@ -331,7 +332,7 @@ class LogReader:
             except OSError as err:
                 self._file.close()
                 raise LogError(f"cannot read {self.path}: {err.strerror or err}") from err
-            except _CORRUPT as err:
+            except CORRUPT_ERRORS as err:
                 self._file.close()
                 raise LogError(
                     f"{self.path} has no summary section and cannot be read through "
@@ -397,6 +398,22 @@ class LogReader:
         """Every metadata record, by name (a later record of the same name wins)."""
         return dict(self.metadata_records())
 
+    def source(self) -> tuple[str, str]:
+        """(sequence, split) from the log's ``cldet.source`` metadata (split "" when not said).
+
+        Raises:
+            LogError: the metadata names no sequence (the log was not written by
+                ``cldet convert``).
+        """
+        source = self.metadata().get(topics.METADATA_SOURCE, {})
+        sequence = source.get("sequence", "").strip()
+        if not sequence:
+            raise LogError(
+                f"{self.path}: no sequence name in its {topics.METADATA_SOURCE!r} metadata: "
+                "expected a log written by `cldet convert` (and `cldet annotate`)"
+            )
+        return sequence, source.get("split", "").strip()
+
     def header(self) -> Header:
         """The log's header record (profile and writing library)."""
         try:
@@ -453,32 +470,21 @@ class LogReader:
                 yield from StreamReader(f, validate_crcs=True).records
         except OSError as err:
             raise LogError(f"cannot read {self.path}: {err.strerror or err}") from err
-        except _CORRUPT as err:
+        except CORRUPT_ERRORS as err:
             raise LogError(
                 f"cannot read {self.path} record by record (corrupt): {_reason(err)}"
             ) from err
 
-    # --- continuing the log (cldet.io.mcap_append) ---------------------------------------------
-    def plan_append(
-        self, replace_prefix: str, replace_metadata: Sequence[str]
-    ) -> AppendPlan | None:
-        """Where this log can be cut to append records (None: it must be rewritten in full)."""
-        try:
-            return plan_append(
-                self._file,
-                self._summary,
-                replace_prefix=replace_prefix,
-                replace_metadata=replace_metadata,
-            )
-        except OSError as err:
-            raise LogError(f"cannot read {self.path}: {err}") from err
+    # --- the raw file (cldet.io.rewrite continues it) ----------------------------------------
+    @property
+    def summary(self) -> Summary:
+        """The log's summary (from its summary section, or a scan when it has none)."""
+        return self._summary
 
-    def copy_prefix(self, target: IO[bytes], length: int) -> None:
-        """Copy the log's first ``length`` bytes into ``target`` (opened for writing, empty)."""
-        try:
-            copy_prefix(self._file, target, length)
-        except OSError as err:
-            raise LogError(f"cannot copy {self.path}: {err}") from err
+    @property
+    def stream(self) -> IO[bytes]:
+        """The open log file (binary, seekable), to copy its bytes; closed by :meth:`close`."""
+        return self._file
 
     # --- messages ----------------------------------------------------------------------------
     def iter_messages(
@@ -512,7 +518,7 @@ class LogReader:
                 )
         except OSError as err:
             raise LogError(f"cannot read {self.path}: {err.strerror or err}") from err
-        except _CORRUPT as err:
+        except CORRUPT_ERRORS as err:
             what = f"topics {', '.join(wanted)}" if wanted else "messages"
             raise LogError(
                 f"cannot read {what} from {self.path} (corrupt): {_reason(err)}"
@@ -610,7 +616,7 @@ class LogReader:
         for message, _ in self._decoded(topic, (topics.SCHEMA_POINT_CLOUD,), start_ns, end_ns):
             try:
                 points = _xyz_view(message.data)
-            except _CORRUPT as err:
+            except CORRUPT_ERRORS as err:
                 raise self.message_error(topic, message, err) from err
             yield Cloud(stamp_ns=message.log_time, points=points)
 
@@ -621,7 +627,7 @@ class LogReader:
         for message, _ in self._decoded(topic, (topics.SCHEMA_POINT_CLOUD,), start_ns, end_ns):
             try:
                 _, columns = decode_cloud(message.data)
-            except _CORRUPT as err:
+            except CORRUPT_ERRORS as err:
                 raise self.message_error(topic, message, err) from err
             yield message.log_time, columns
 
@@ -638,7 +644,7 @@ class LogReader:
                 else:
                     p = PoseInFrame.FromString(message.data).pose.position
                     xyz = (p.x, p.y, p.z)
-            except _CORRUPT as err:
+            except CORRUPT_ERRORS as err:
                 raise self.message_error(topic, message, err) from err
             yield PositionSample(stamp_ns=message.log_time, position=np.array(xyz, np.float64))
 
@@ -649,9 +655,23 @@ class LogReader:
         for message, _ in self._decoded(topic, (topics.SCHEMA_CLASS_LABEL,), start_ns, end_ns):
             try:
                 label = ClassLabel.FromString(message.data)
-            except _CORRUPT as err:
+            except CORRUPT_ERRORS as err:
                 raise self.message_error(topic, message, err) from err
             yield ClassSample(stamp_ns=message.log_time, class_id=int(label.class_id))
+
+    def iter_class_estimates(self, topic: str = topics.CLASS_ESTIMATE) -> Iterator[ClassEstimate]:
+        """The drone-type estimates of a ``cldet.ClassEstimate`` topic, in log order."""
+        for message, _ in self._decoded(topic, (topics.SCHEMA_CLASS_ESTIMATE,), None, None):
+            try:
+                msg = ClassEstimateMessage.FromString(message.data)
+            except CORRUPT_ERRORS as err:
+                raise self.message_error(topic, message, err) from err
+            ids, probs = tuple(int(c) for c in msg.class_ids), tuple(msg.probabilities)
+            if len(ids) != len(probs) or int(msg.class_id) not in ids:
+                raise self.message_error(
+                    topic, message, ValueError("class ids and probabilities do not match")
+                )
+            yield ClassEstimate(message.log_time, int(msg.class_id), ids, probs)
 
     def iter_estimates(
         self,
@@ -665,7 +685,7 @@ class LogReader:
             try:
                 est = EstimateMessage.FromString(message.data)
                 source = Source(est.source)
-            except _CORRUPT as err:
+            except CORRUPT_ERRORS as err:
                 raise self.message_error(topic, message, err) from err
             yield (
                 Estimate(

@@ -46,10 +46,10 @@ from cldet.io import topics
 from cldet.io.files import atomic_output
 from cldet.io.mcap_append import AppendPlan, AppendWriter
 from cldet.io.ros import FrameTransform
-from cldet.io.schemas import ClassLabel, file_descriptor_set
+from cldet.io.schemas import ClassEstimateMessage, ClassLabel, file_descriptor_set
 from cldet.io.schemas import Estimate as EstimateMessage
 from cldet.stamps import NS_PER_S
-from cldet.types import Cluster, Estimate
+from cldet.types import ClassEstimate, Cluster, Estimate
 
 __all__ = ["Compression", "LogWriter", "atomic_output", "png_size"]
 
@@ -559,6 +559,16 @@ class LogWriter:
             track_id=int(track_id),
         )
         self.write_message(topic, stamp_ns, msg)
+
+    def write_class_estimate(self, topic: str, estimate: ClassEstimate) -> None:
+        """Write a ``cldet.ClassEstimate`` (the most probable class, every class's probability)."""
+        msg = ClassEstimateMessage(
+            timestamp=_timestamp(int(estimate.stamp_ns)),
+            class_id=int(estimate.class_id),
+            class_ids=[int(c) for c in estimate.class_ids],
+            probabilities=[float(p) for p in estimate.probabilities],
+        )
+        self.write_message(topic, estimate.stamp_ns, msg)
 
     def write_metadata(self, name: str, data: Mapping[str, str]) -> None:
         """Write an MCAP metadata record ``name`` holding string keys and string values."""

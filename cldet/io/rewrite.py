@@ -25,7 +25,7 @@ from mcap.records import Attachment, Channel, Message, Metadata, Schema
 
 from cldet.errors import LogError
 from cldet.io.files import atomic_output, resolve_link, temporary_path
-from cldet.io.mcap_append import AppendPlan, is_replaced_channel
+from cldet.io.mcap_append import AppendPlan, copy_prefix, is_replaced_channel, plan_append
 from cldet.io.mcap_read import LogReader, open_log
 from cldet.io.mcap_write import Compression, LogWriter
 
@@ -70,7 +70,7 @@ def rewrite_log(
     """
     added = sorted(additions, key=lambda a: a[0])
     with open_log(source) as reader:
-        plan = reader.plan_append(replace_prefix, replace_metadata)
+        plan = _plan_append(reader, replace_prefix, replace_metadata)
         if plan is not None:
             return _append(reader, plan, target, added, metadata or {})
     clean = temporary_path(resolve_link(target), "clean")
@@ -78,7 +78,7 @@ def rewrite_log(
         with open_log(source) as reader, atomic_output(clean, overwrite=True) as out:
             copied, dropped = _copy_without(reader, out, replace_prefix, replace_metadata)
         with open_log(clean) as reader:
-            plan = reader.plan_append(replace_prefix, replace_metadata)
+            plan = _plan_append(reader, replace_prefix, replace_metadata)
             if plan is None:  # cannot happen for a log LogWriter wrote; never silently
                 raise LogError(f"{clean}: a clean copy of {source} cannot be continued")
             stats = _append(reader, plan, target, added, metadata or {})
@@ -86,6 +86,21 @@ def rewrite_log(
         with contextlib.suppress(FileNotFoundError):
             clean.unlink()
     return RewriteStats(copied, dropped, stats.added_messages)
+
+
+def _plan_append(
+    reader: LogReader, replace_prefix: str, replace_metadata: Sequence[str]
+) -> AppendPlan | None:
+    """Where the log can be cut to append records (None: it must be rewritten in full)."""
+    try:
+        return plan_append(
+            reader.stream,
+            reader.summary,
+            replace_prefix=replace_prefix,
+            replace_metadata=replace_metadata,
+        )
+    except OSError as err:
+        raise LogError(f"cannot read {reader.path}: {err}") from err
 
 
 def _append(
@@ -97,7 +112,10 @@ def _append(
 ) -> RewriteStats:
     """Copy the log up to ``plan.cut`` into ``target`` (atomically) and append the additions."""
     with atomic_output(target, overwrite=True) as out:
-        reader.copy_prefix(out, plan.cut)
+        try:
+            copy_prefix(reader.stream, out, plan.cut)
+        except OSError as err:
+            raise LogError(f"cannot copy {reader.path}: {err}") from err
         with LogWriter(out, continues=plan) as writer:
             for _, write in added:
                 write(writer)

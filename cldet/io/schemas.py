@@ -30,11 +30,13 @@ def _field(
     number: int,
     kind: int,
     type_name: str = "",
+    *,
+    repeated: bool = False,
 ) -> None:
     field = message.field.add()
     field.name = name
     field.number = number
-    field.label = _F.LABEL_OPTIONAL
+    field.label = _F.LABEL_REPEATED if repeated else _F.LABEL_OPTIONAL
     field.type = kind
     if type_name:
         field.type_name = type_name
@@ -77,6 +79,12 @@ def _file_descriptor_proto() -> descriptor_pb2.FileDescriptorProto:
     _field(est, "n_points", 6, _F.TYPE_UINT32)  # points in the associated cluster
     _field(est, "sigma_m", 7, _F.TYPE_DOUBLE)  # 1-sigma position uncertainty, metres
     _field(est, "track_id", 8, _F.TYPE_UINT32)
+    cls = fdp.message_type.add()
+    cls.name = "ClassEstimate"  # the estimated drone type of a sequence, from the evidence so far
+    _field(cls, "timestamp", 1, _F.TYPE_MESSAGE, ".google.protobuf.Timestamp")
+    _field(cls, "class_id", 2, _F.TYPE_UINT32)  # the most probable class
+    _field(cls, "class_ids", 3, _F.TYPE_UINT32, repeated=True)  # the classes the model knows
+    _field(cls, "probabilities", 4, _F.TYPE_DOUBLE, repeated=True)  # one per class id
     return fdp
 
 
@@ -99,8 +107,15 @@ Estimate: Any = message_factory.GetMessageClass(_FILE.message_types_by_name["Est
 ``Estimate.Source``: 1 detected, 2 predicted, 3 smoothed, 4 fallback, as :class:`cldet.types.Source`),
 ``n_points`` (uint32), ``sigma_m`` (double, metres), ``track_id`` (uint32)."""
 
+ClassEstimateMessage: Any = message_factory.GetMessageClass(
+    _FILE.message_types_by_name["ClassEstimate"]
+)
+"""``cldet.ClassEstimate``: ``timestamp``, ``class_id`` (uint32, the most probable),
+``class_ids`` (repeated uint32) and ``probabilities`` (repeated double, one per class id)."""
+
 assert ClassLabel.DESCRIPTOR.full_name == topics.SCHEMA_CLASS_LABEL
 assert Estimate.DESCRIPTOR.full_name == topics.SCHEMA_ESTIMATE
+assert ClassEstimateMessage.DESCRIPTOR.full_name == topics.SCHEMA_CLASS_ESTIMATE
 
 
 @cache

@@ -25,7 +25,7 @@ from rosbags.serde import SerdeError
 
 from cldet.errors import LogError
 from cldet.io import ros, topics
-from cldet.io.mcap_read import _CORRUPT, LogReader, decode_xyz, open_log
+from cldet.io.mcap_read import CORRUPT_ERRORS, LogReader, decode_xyz, open_log
 from cldet.types import PositionSample
 
 __all__ = [
@@ -41,7 +41,7 @@ __all__ = [
 
 TF_STATIC: Final = ros.TF_STATIC
 # what bytes that do not decode raise (cldet's readers, protobuf, rosbags), and a bad cloud
-_UNDECODABLE: tuple[type[BaseException], ...] = (*_CORRUPT, SerdeError)
+_UNDECODABLE: tuple[type[BaseException], ...] = (*CORRUPT_ERRORS, SerdeError)
 CLOUD_SCHEMAS: Final = (topics.SCHEMA_POINT_CLOUD, *ros.CLOUD_TYPES)
 POSITION_SCHEMAS: Final = (topics.SCHEMA_POSE_IN_FRAME, topics.SCHEMA_ESTIMATE, *ros.POSITION_TYPES)
 

@@ -34,6 +34,7 @@ CLOUD_TOPICS: Final = (LIDAR_360, LIVOX_AVIA, RADAR)
 # --- result channels (written by `cldet annotate`) -----------------------------------------
 ESTIMATE: Final = "/cldet/estimate"  # cldet.Estimate, one per Mid-360 frame (refined track)
 CAUSAL: Final = "/cldet/causal"  # cldet.Estimate, the causal estimate as it was made per frame
+CLASS_ESTIMATE: Final = "/cldet/class"  # cldet.ClassEstimate, the drone type (with --model)
 POSE: Final = "/cldet/pose"  # foxglove.PoseInFrame (Foxglove draws it; Rerun: see DRONE)
 TRAJECTORY: Final = "/cldet/trajectory"  # foxglove.PosesInFrame, the track (Rerun: TRACK)
 FOREGROUND: Final = "/cldet/foreground"  # foxglove.PointCloud x,y,z,cluster_id
@@ -74,6 +75,7 @@ SCHEMA_SCENE_UPDATE: Final = "foxglove.SceneUpdate"
 SCHEMA_FRAME_TRANSFORMS: Final = "foxglove.FrameTransforms"
 SCHEMA_CLASS_LABEL: Final = "cldet.ClassLabel"
 SCHEMA_ESTIMATE: Final = "cldet.Estimate"
+SCHEMA_CLASS_ESTIMATE: Final = "cldet.ClassEstimate"
 
 # --- metadata records ------------------------------------------------------------------------
 METADATA_SOURCE: Final = "cldet.source"  # split, sequence, source path, counts, cldet version

@@ -60,3 +60,28 @@ def test_fit_bias_needs_overlapping_detections() -> None:
     wrong = [Estimate(k * 10 * MS, np.full(3, 7.0), Source.DETECTED, 3, 0.1) for k in range(5)]
     with pytest.raises(CldetError, match="within 1.0 m"):
         fit_bias(wrong, truth)
+
+
+def test_detection_pairs_interpolate_inside_the_truth_and_skip_wide_gaps() -> None:
+    from cldet.core.bias import detection_pairs
+
+    truth = [
+        PositionSample(0, np.array([0.0, 0.0, 10.0])),
+        PositionSample(100 * MS, np.array([1.0, 0.0, 10.0])),
+        PositionSample(500 * MS, np.array([5.0, 0.0, 10.0])),
+    ]
+    dets = [
+        Estimate(50 * MS, np.array([0.5, 0.1, 10.0]), Source.DETECTED, 3, 0.1),  # interpolated
+        Estimate(300 * MS, np.array([3.0, 0.0, 10.0]), Source.DETECTED, 3, 0.1),  # 400 ms gap
+        Estimate(500 * MS, np.array([5.0, 0.0, 10.2]), Source.DETECTED, 3, 0.1),  # at a sample
+        Estimate(600 * MS, np.array([6.0, 0.0, 10.0]), Source.DETECTED, 3, 0.1),  # outside
+        Estimate(60 * MS, np.array([9.0, 9.0, 9.0]), Source.PREDICTED, 0, 1.0),  # not detected
+    ]
+    positions, true = detection_pairs(dets, truth, max_truth_gap_ns=200 * MS)
+    np.testing.assert_allclose(positions, [[0.5, 0.1, 10.0], [5.0, 0.0, 10.2]])
+    np.testing.assert_allclose(true, [[0.5, 0.0, 10.0], [5.0, 0.0, 10.0]])
+    positions, true = detection_pairs(dets, truth)  # no gap limit: the 300 ms one too
+    assert len(positions) == len(true) == 3
+    np.testing.assert_allclose(true[1], [3.0, 0.0, 10.0])
+    empty, none = detection_pairs(dets, [])
+    assert empty.shape == none.shape == (0, 3)

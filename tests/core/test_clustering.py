@@ -89,6 +89,26 @@ def test_large_random_sets_equal_sklearn() -> None:
         assert _partition(ours) == _partition(ref)
 
 
+@pytest.mark.parametrize("min_samples", [1, 3])
+def test_equals_scipy_pairs_and_components(min_samples: int) -> None:
+    """The library reference of benchmarks/bench_libraries.py: cKDTree pairs, graph components.
+
+    The numba grid is kept because it is faster (bench_libraries.py); it must give the same
+    partition as the library on a foreground-like cloud (blobs, clutter, speckle).
+    """
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_libraries.py"
+    spec = importlib.util.spec_from_file_location("bench_libraries", path)
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    points = bench.foreground_cloud(3000, 11)
+    ours = cluster_points(points, 1.0, min_samples)
+    assert _partition(ours) == _partition(bench.scipy_dbscan(points, 1.0, min_samples))
+
+
 def test_exact_at_eps_boundary_and_far_coordinates() -> None:
     points = np.array([[0, 0, 0], [1.0, 0, 0], [2.5, 0, 0], [1e5, 1e5, 50], [1e5 + 0.5, 1e5, 50]])
     labels = cluster_points(points, 1.0)

@@ -20,11 +20,10 @@ from cldet.core.estimator import (
     FrameDetections,
     SequenceEstimate,
     TrackEstimator,
-    estimate_sequence,
     fuse_points,
-    make_estimator,
 )
 from cldet.core.frames import pair_frames, valid_points
+from cldet.core.methods import estimate_sequence, make_estimator
 from cldet.errors import FrameOrderError
 from cldet.types import Cluster, LidarFrame, PositionSample, Source
 
@@ -88,10 +87,19 @@ def _rms(e: np.ndarray) -> float:
     return float(np.sqrt(np.mean(e**2)))
 
 
+_RUNS: dict[tuple[int, str, str], tuple[list[FrameDetections], SequenceEstimate]] = {}
+
+
 def _run(
     sim: Simulated, method: str = "track", **over: object
 ) -> tuple[list[FrameDetections], SequenceEstimate]:
-    return estimate_sequence(lambda: sim.frames, load_config(overrides={"method": method, **over}))
+    """One estimator run, remembered: several tests score the same sequence with the same config
+    (the estimator is deterministic, its results frozen; the determinism test runs it afresh)."""
+    key = (id(sim), method, repr(sorted(over.items())))
+    if key not in _RUNS:
+        config = load_config(overrides={"method": method, **over})
+        _RUNS[key] = estimate_sequence(lambda: sim.frames, config)
+    return _RUNS[key]
 
 
 @pytest.mark.slow

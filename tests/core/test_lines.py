@@ -7,8 +7,8 @@ import pytest
 from numpy.typing import NDArray
 
 from cldet.config import load_config
-from cldet.core.estimator import estimate_sequence
 from cldet.core.lines import find_lines
+from cldet.core.methods import estimate_sequence
 from cldet.core.tracking import ClusterTable, TrackRecord
 from cldet.types import LidarFrame
 from tests.core.scene import scan

@@ -35,8 +35,13 @@ def export(
         ),
     ] = None,
     class_id: Annotated[
-        int, typer.Option("--class-id", help="Classification written on every row.")
-    ] = 0,
+        int | None,
+        typer.Option(
+            "--class-id",
+            help="Classification written on every row. Default: each log's drone type from "
+            "`cldet annotate --model` (/cldet/class), else 0.",
+        ),
+    ] = None,
     max_extrapolation_s: Annotated[
         float,
         typer.Option(
@@ -226,13 +231,20 @@ def _print_evaluation(ev: Evaluation) -> None:
         for row in table:
             per_seq.add_row(*row)
         console.print(per_seq)
-        return
-    width = max(len(k) for k, _ in summary)
-    for key, value in summary:
-        typer.echo(f"{key:<{width}}  {value}")
-    typer.echo("")
-    typer.echo("per sequence:")
-    _echo_columns([h.replace("\n", " ") for h in headers], table)
+    else:
+        width = max(len(k) for k, _ in summary)
+        for key, value in summary:
+            typer.echo(f"{key:<{width}}  {value}")
+        typer.echo("")
+        typer.echo("per sequence:")
+        _echo_columns([h.replace("\n", " ") for h in headers], table)
+    confusion = ev.confusion()
+    if confusion is not None:
+        typer.echo("")
+        typer.echo(
+            "drone type confusion (rows: true class, columns: Classification; rows counted):"
+        )
+        typer.echo(confusion)
 
 
 def _echo_columns(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> None:

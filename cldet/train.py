@@ -1,0 +1,516 @@
+"""``cldet train``: learn from labelled logs what the hand-set estimator can only assume.
+
+From logs with ``/ground_truth`` (and ``/class`` where present) one pass per log runs the
+estimator's per-frame verb with the configuration given and keeps its candidate tracks
+(:class:`cldet.core.estimator.Candidates`); each track is matched to the truth:
+
+- a track whose detections lie (median) within :data:`DRONE_M` of the truth at their times is
+  the drone's, one whose median distance exceeds :data:`CLUTTER_M` is clutter, those between are
+  left out (a track that jumped from the drone to something else);
+- the **scan-time offset**: the time inside the scan at which the drone's points were taken,
+  the offset (0-100 ms after the stamp) at which the truth best matches the drone tracks'
+  centroids (a moving drone's centroid lies along its path by speed x offset; a hovering one
+  says nothing, and the fit says so by an unchanged error);
+- the **centroid bias** (along the ray and in z, as ``cldet calibrate``) from the same pairs;
+- the **drone-vs-clutter scorer**: gradient-boosted trees over the tracks' physical features
+  (:data:`cldet.core.features.FEATURE_NAMES`), each track weighted by its detections and the two
+  classes balanced; the refinement uses its probability in place of the hand-set track factors;
+- the **drone-type classifier** (when the logs carry ``/class`` with two classes or more): the
+  same features of the drone's tracks, each labelled with its sequence's class, voted over the
+  chosen chain's tracks at annotation time.
+
+A leave-one-sequence-out cross-validation (every log held out once, models fitted on the others)
+reports the type accuracy per row and the confusion matrix, and the refined position error with
+the learned scorer against the default's, on the same candidates.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cldet.config import BiasConfig, CldetConfig
+from cldet.core.bias import fit_bias_sequences
+from cldet.core.estimator import Candidates, TrackEstimator, refine_candidates
+from cldet.core.features import FEATURE_NAMES, TYPE_COLUMNS, track_detections, track_features
+from cldet.core.model import LearnedModel, one_thread
+from cldet.core.trajectory import evaluate_trajectory
+from cldet.errors import CldetError, OutputExistsError
+from cldet.evaluate import confusion_text
+from cldet.io import topics
+from cldet.io.files import check_output
+from cldet.io.mcap_read import open_log
+from cldet.io.sources import iter_log_positions, select_topics
+from cldet.modelfile import write_model
+from cldet.pipeline import read_frames
+from cldet.progress import NullProgress, Progress
+from cldet.stamps import NS_PER_S
+from cldet.types import Estimate, PositionSample, Source
+
+__all__ = [
+    "CLUTTER_M",
+    "DRONE_M",
+    "SequenceSample",
+    "TrainError",
+    "TrainReport",
+    "collect_sequence",
+    "cross_validate",
+    "fit_model",
+    "train_logs",
+]
+
+DRONE_M: Final = 1.0
+CLUTTER_M: Final = 3.0
+MIN_DRONE_DETECTIONS: Final = 20  # fewer over all logs: too few to learn from
+_PREFIX_STEP = 5  # the type classifier learns from a drone track's first 5, 10, 15, ... detections
+_OFFSETS_S = np.arange(0.0, 0.1001, 0.0025)  # candidate scan-time offsets
+_MAX_PAIR_M = 1.0  # detection/truth pairs farther apart are another object
+_TREE_PARAMS: Final[dict[str, Any]] = {
+    "max_iter": 150,
+    "learning_rate": 0.1,
+    "max_leaf_nodes": 15,
+    "min_samples_leaf": 10,
+    "l2_regularization": 1.0,
+    "early_stopping": False,
+    "random_state": 0,
+}
+
+
+_TYPE_TREE_PARAMS: Final[dict[str, Any]] = {
+    **_TREE_PARAMS,
+    "max_iter": 60,
+    "max_leaf_nodes": 7,
+    "min_samples_leaf": 50,
+    "l2_regularization": 5.0,
+}  # a handful of sequences per class: small, regularised trees
+
+
+class TrainError(CldetError):
+    """The training logs cannot give a model (no truth, too few detections, ...)."""
+
+
+@dataclass
+class SequenceSample:
+    """One training log reduced to what learning needs."""
+
+    log: Path
+    cand: Candidates
+    truth_ns: NDArray[np.int64]  # (G,)
+    truth_xyz: NDArray[np.float64]  # (G,3)
+    class_id: int | None  # the sequence's drone type (None: no /class)
+    features: NDArray[np.float64]  # (T,F) per candidate track of two detections or more
+    hits: NDArray[np.float64]  # (T,) its detections
+    labels: NDArray[np.int8]  # (T,) 1 the drone, 0 clutter, -1 left out
+    pair_ns: NDArray[np.int64]  # (P,) stamps of the drone tracks' cluster detections
+    pair_xyz: NDArray[np.float64]  # (P,3) their centroids
+    type_features: NDArray[np.float64]  # (Q,F) the drone tracks' prefixes (what typing sees)
+
+    def truth_at(self, stamps_ns: NDArray[np.int64]) -> NDArray[np.float64]:
+        """(Q,3) the truth at these stamps (linear inside its span, NaN outside)."""
+        out = evaluate_trajectory(self.truth_ns, self.truth_xyz, stamps_ns)
+        outside = (stamps_ns < self.truth_ns[0]) | (stamps_ns > self.truth_ns[-1])
+        out[outside] = np.nan
+        return out
+
+
+def _read_truth(log: Path, topic: str | None) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    samples = list(iter_log_positions(log, topic)) if topic else []
+    if len(samples) < 2:
+        raise TrainError(
+            f"{log}: no ground truth ({topics.GROUND_TRUTH} with two samples or more):"
+            " training needs labelled logs (the challenge's train split, or your own flights"
+            " with a truth topic)"
+        )
+    ns = np.array([s.stamp_ns for s in samples], dtype=np.int64)
+    order = np.argsort(ns, kind="stable")
+    return ns[order], np.array([samples[i].position for i in order], dtype=np.float64)
+
+
+def _read_class(log: Path) -> int | None:
+    with open_log(log) as reader:
+        if not reader.list_topics().get(topics.CLASS):
+            return None
+        ids = {c.class_id for c in reader.iter_classes(topics.CLASS)}
+    if len(ids) != 1:
+        raise TrainError(f"{log}: {topics.CLASS} changes within the sequence ({sorted(ids)})")
+    return ids.pop()
+
+
+def collect_sequence(
+    log: Path,
+    config: CldetConfig,
+    *,
+    truth_topic: str | None = None,
+    progress: Progress | None = None,
+) -> SequenceSample:
+    """Run the per-frame pass over ``log`` and label its candidate tracks against the truth.
+
+    Raises:
+        TrainError: the log has no ground truth, or its class changes within it.
+        LogError, CorruptMessageError: the log cannot be read.
+    """
+    progress = progress or NullProgress()
+    with open_log(log) as reader:
+        sensors = select_topics(reader, None, None, truth_topic)
+        n_frames = reader.list_topics().get(sensors.lidar, 0)
+    truth_ns, truth_xyz = _read_truth(log, sensors.truth)
+    class_id = _read_class(log)
+    estimator = TrackEstimator(config)
+    progress.start(n_frames, f"{log.name}: tracking")
+    for frame in read_frames(log, sensors, config.frames):
+        estimator.register_frame(frame)
+        progress.advance()
+    cand = estimator.candidates()
+    offset_ns = int(round(config.frames.scan_offset_s * NS_PER_S))
+    sample = SequenceSample(
+        log,
+        cand,
+        truth_ns,
+        truth_xyz,
+        class_id,
+        *_empty_tracks(),
+        *_empty_pairs(),
+        np.zeros((0, len(FEATURE_NAMES))),
+    )
+    feats, hits, labels, pair_ns, pair_xyz, prefixes = [], [], [], [], [], []
+    tc = config.tracking
+    for rec in cand.records:
+        if len(rec.frames) < 2:
+            continue
+        det = track_detections(rec, cand.tables, tc)
+        feats.append(track_features(rec, det, cand.times_s[rec.frames]))
+        hits.append(float(len(rec.frames)))
+        stamps = cand.stamps_ns[rec.frames]
+        d = np.linalg.norm(rec.positions - sample.truth_at(stamps + offset_ns), axis=1)
+        d = d[np.isfinite(d)]
+        label = -1
+        if len(d) >= 2:
+            med = float(np.median(d))
+            label = 1 if med <= DRONE_M else 0 if med > CLUTTER_M else -1
+        labels.append(label)
+        if label == 1:
+            keep = ~rec.raw
+            pair_ns.append(stamps[keep])
+            pair_xyz.append(rec.positions[keep])
+            # annotate types a chain from its growing evidence: learn from the same prefixes
+            times = cand.times_s[rec.frames]
+            for upto in (*range(_PREFIX_STEP, len(rec.frames), _PREFIX_STEP), len(rec.frames)):
+                prefixes.append(track_features(rec, det, times, upto))
+    if feats:
+        sample.features = np.array(feats)
+        sample.hits = np.array(hits)
+        sample.labels = np.array(labels, dtype=np.int8)
+    if prefixes:
+        sample.type_features = np.array(prefixes)
+    if pair_ns:
+        sample.pair_ns = np.concatenate(pair_ns)
+        sample.pair_xyz = np.concatenate(pair_xyz)
+    return sample
+
+
+def _empty_tracks() -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int8]]:
+    return np.zeros((0, len(FEATURE_NAMES))), np.zeros(0), np.zeros(0, dtype=np.int8)
+
+
+def _empty_pairs() -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+
+
+# ---------------------------------------------------------------------------- fitting
+
+
+def fit_scan_offset(samples: Sequence[SequenceSample]) -> tuple[float, float, float]:
+    """The scan-time offset (s) at which the drone tracks' centroids best match the truth, and
+    the RMS distance (m) of those pairs at 0 and at the fitted offset (pairs within 1 m)."""
+    errors = []
+    for off in _OFFSETS_S:
+        sq = []
+        for s in samples:
+            if len(s.pair_ns) == 0:
+                continue
+            t = s.truth_at(s.pair_ns + int(round(off * NS_PER_S)))
+            d2 = np.sum((s.pair_xyz - t) ** 2, axis=1)
+            sq.append(np.minimum(d2[np.isfinite(d2)], _MAX_PAIR_M**2))
+        allsq = np.concatenate(sq) if sq else np.zeros(0)
+        errors.append(float(np.mean(allsq)) if len(allsq) else float("nan"))
+    err = np.array(errors)
+    if not np.isfinite(err).any():
+        raise TrainError("no drone detections matched to the truth: cannot fit the scan offset")
+    k = int(np.nanargmin(err))
+    return float(_OFFSETS_S[k]), float(np.sqrt(err[0])), float(np.sqrt(err[k]))
+
+
+def fit_centroid_bias(samples: Sequence[SequenceSample], offset_s: float) -> BiasConfig:
+    """The centroid bias (``cldet.core.bias``) from the drone tracks' centroids and the truth at
+    their points' time."""
+    off = int(round(offset_s * NS_PER_S))
+    sequences = []
+    for s in samples:
+        dets = [
+            Estimate(int(t) + off, p, Source.DETECTED, 1, 0.0)
+            for t, p in zip(s.pair_ns, s.pair_xyz, strict=True)
+        ]
+        truth = [PositionSample(int(t), p) for t, p in zip(s.truth_ns, s.truth_xyz, strict=True)]
+        sequences.append((dets, truth))
+    return fit_bias_sequences(sequences)
+
+
+def _balanced_weights(labels: NDArray[np.int64], hits: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Each example weighted by its detections, every class carrying the same total weight."""
+    w = hits.astype(np.float64).copy()
+    for c in np.unique(labels):
+        m = labels == c
+        w[m] *= len(labels) / (len(np.unique(labels)) * w[m].sum())
+    return w
+
+
+def fit_scorer(samples: Sequence[SequenceSample]) -> Any:
+    """Gradient-boosted drone-vs-clutter trees over the labelled tracks of ``samples``."""
+    from sklearn.ensemble import HistGradientBoostingClassifier
+
+    x = np.concatenate([s.features for s in samples])
+    y = np.concatenate([s.labels for s in samples]).astype(np.int64)
+    h = np.concatenate([s.hits for s in samples])
+    keep = y >= 0
+    x, y, h = x[keep], y[keep], h[keep]
+    if len(np.unique(y)) < 2:
+        raise TrainError("the candidate tracks are all drone or all clutter: nothing to tell apart")
+    with one_thread():
+        return HistGradientBoostingClassifier(**_TREE_PARAMS).fit(
+            x, y, sample_weight=_balanced_weights(y, h)
+        )
+
+
+def fit_typer(samples: Sequence[SequenceSample], class_ids: list[int]) -> Any:
+    """Gradient-boosted drone-type trees over the drone tracks' prefixes of ``samples`` (labels
+    are indices into ``class_ids``; every class carries the same total weight)."""
+    from sklearn.ensemble import HistGradientBoostingClassifier
+
+    xs, ys = [], []
+    for s in samples:
+        if s.class_id is None or len(s.type_features) == 0:
+            continue
+        xs.append(s.type_features)
+        ys.append(np.full(len(s.type_features), class_ids.index(s.class_id)))
+    y = np.concatenate(ys) if ys else np.zeros(0, dtype=np.int64)
+    if len(np.unique(y)) < 2:
+        raise TrainError("the drone tracks cover fewer than two classes: cannot learn the type")
+    with one_thread():
+        return HistGradientBoostingClassifier(**_TYPE_TREE_PARAMS).fit(
+            np.concatenate(xs)[:, TYPE_COLUMNS],
+            y,
+            sample_weight=_balanced_weights(y, np.ones(len(y))),
+        )
+
+
+def fit_model(
+    samples: Sequence[SequenceSample],
+    *,
+    with_timing: bool = True,
+    info: dict[str, Any] | None = None,
+) -> LearnedModel:
+    """Every part of the model from ``samples`` (see the module docstring).
+
+    Raises:
+        TrainError: too few drone detections, a single class of tracks.
+    """
+    n_pairs = sum(len(s.pair_ns) for s in samples)
+    if n_pairs < MIN_DRONE_DETECTIONS:
+        raise TrainError(
+            f"only {n_pairs} drone detections matched to the truth in {len(samples)} log(s)"
+            f" (at least {MIN_DRONE_DETECTIONS} needed): " + ", ".join(str(s.log) for s in samples)
+        )
+    offset, rms0, rms1 = fit_scan_offset(samples) if with_timing else (0.0, 0.0, 0.0)
+    bias = fit_centroid_bias(samples, offset) if with_timing else BiasConfig()
+    class_ids = sorted({s.class_id for s in samples if s.class_id is not None})
+    typer = fit_typer(samples, class_ids) if len(class_ids) >= 2 else None
+    meta = dict(info or {})
+    meta.update({"offset_rms_m": [rms0, rms1], "logs": len(samples), "drone_detections": n_pairs})
+    return LearnedModel(
+        scan_offset_s=offset,
+        bias_along_ray_m=bias.along_ray_m,
+        bias_z_m=bias.z_m,
+        scorer=fit_scorer(samples),
+        typer=typer,
+        class_ids=class_ids if typer is not None else [],
+        info=meta,
+    )
+
+
+# -------------------------------------------------------------------- cross-validation
+
+
+@dataclass(frozen=True)
+class FoldResult:
+    """One held-out log of the cross-validation."""
+
+    log: Path
+    true_class: int | None
+    predicted_class: int | None
+    rows: int  # truth rows scored
+    mse_default: float  # per coordinate, m^2
+    mse_learned: float
+    fails_default: bool  # RMS over 1 m
+    fails_learned: bool
+
+
+def _mse(sample: SequenceSample, estimates: Sequence[Estimate]) -> float:
+    stamps = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
+    pos = np.array([e.position for e in estimates], dtype=np.float64)
+    at = evaluate_trajectory(stamps, pos, sample.truth_ns)
+    return float(np.mean((at - sample.truth_xyz) ** 2))
+
+
+def cross_validate(
+    samples: Sequence[SequenceSample], config: CldetConfig, progress: Progress | None = None
+) -> list[FoldResult]:
+    """Leave one sequence out: fit on the others, refine and type the held-out one.
+
+    Both refinements use the held-out log's candidates with the scan offset of the pass that
+    made them; the learned one applies the learned centroid bias, the default one the
+    configuration's.
+    """
+    progress = progress or NullProgress()
+    progress.start(len(samples), "cross-validation")
+    out = []
+    for i, held in enumerate(samples):
+        rest = [s for j, s in enumerate(samples) if j != i]
+        model = fit_model(rest)
+        learned_cfg = config.model_copy(
+            update={"bias": BiasConfig(along_ray_m=model.bias_along_ray_m, z_m=model.bias_z_m)}
+        )
+        default = refine_candidates(held.cand, config)
+        learned = refine_candidates(held.cand, learned_cfg, model)
+        predicted = learned.classes[-1].class_id if learned.classes else None
+        mse_d, mse_l = _mse(held, default.estimates), _mse(held, learned.estimates)
+        out.append(
+            FoldResult(
+                held.log,
+                held.class_id,
+                predicted,
+                len(held.truth_ns),
+                mse_d,
+                mse_l,
+                bool(np.sqrt(3 * mse_d) > 1.0),
+                bool(np.sqrt(3 * mse_l) > 1.0),
+            )
+        )
+        progress.advance()
+    return out
+
+
+# ---------------------------------------------------------------------------- command
+
+
+@dataclass(frozen=True)
+class TrainReport:
+    """What ``train_logs`` did."""
+
+    model: LearnedModel
+    folds: list[FoldResult]
+    seconds: float
+
+    def describe(self) -> str:
+        """The cross-validation report for the terminal."""
+        m = self.model
+        lines = [
+            f"scan-time offset {m.scan_offset_s * 1000:.1f} ms after the stamp (drone centroid vs"
+            f" truth RMS {m.info['offset_rms_m'][0]:.3f} m at 0 ms -> {m.info['offset_rms_m'][1]:.3f} m);"
+            f" centroid bias along the ray {m.bias_along_ray_m:+.3f} m, in z {m.bias_z_m:+.3f} m",
+        ]
+        if self.folds:
+            n = len(self.folds)
+            rows = np.array([f.rows for f in self.folds], dtype=np.float64)
+            mse_d = float(np.average([f.mse_default for f in self.folds], weights=rows))
+            mse_l = float(np.average([f.mse_learned for f in self.folds], weights=rows))
+            fd = sum(f.fails_default for f in self.folds)
+            fl = sum(f.fails_learned for f in self.folds)
+            lines.append(
+                f"leave-one-sequence-out over {n} logs: position MSE per coordinate default"
+                f" {mse_d:.4f} m^2 -> learned {mse_l:.4f} m^2; sequences off by more than 1 m"
+                f" (RMS): default {fd}, learned {fl}"
+            )
+            typed = [f for f in self.folds if f.true_class is not None]
+            true = [int(f.true_class) for f in typed if f.true_class is not None]
+            # no chain, no type: counted wrong (and left out of the matrix)
+            pred = [-1 if f.predicted_class is None else f.predicted_class for f in typed]
+            if typed and m.class_ids:
+                w = np.array([f.rows for f in typed], dtype=np.float64)
+                ok = np.array([t == p for t, p in zip(true, pred, strict=True)], dtype=np.float64)
+                lines.append(
+                    f"drone type: per-row accuracy {float(np.average(ok, weights=w)):.3f}"
+                    f" ({int(ok.sum())}/{len(typed)} sequences)"
+                )
+                lines.append(
+                    confusion_text(
+                        true,
+                        pred,
+                        m.class_ids,
+                        weights=[f.rows for f in typed],
+                    )
+                )
+        lines.append(f"trained in {self.seconds:.1f} s")
+        return "\n".join(lines)
+
+
+def train_logs(
+    logs: Sequence[Path],
+    out: Path,
+    *,
+    config: CldetConfig | None = None,
+    cross_validation: bool = True,
+    overwrite: bool = False,
+    progress_factory: Callable[[], Progress] | None = None,
+    warn: Callable[[str], None] = lambda _: None,
+) -> TrainReport:
+    """Learn a model from labelled ``logs`` and write it to ``out`` (atomically).
+
+    Raises:
+        TrainError: no logs, no truth, too few detections, one class of tracks only.
+        OutputError: ``out`` exists (without ``overwrite``) or cannot be written.
+    """
+    started = time.perf_counter()
+    config = config or CldetConfig()
+    if config.method != "track":
+        raise TrainError(f"training learns for the `track` method, not {config.method!r}")
+    if any(v != 0.0 for v in (config.bias.along_ray_m, config.bias.z_m)):
+        config = config.model_copy(update={"bias": BiasConfig()})
+        warn("the configuration's bias is ignored: training fits it from the truth")
+    if not logs:
+        raise TrainError("no training logs given")
+    check_output(out, "model")  # fail before the work, not after
+    if Path(out).exists() and not overwrite:
+        raise OutputExistsError(f"{out} already exists: pass overwrite (--overwrite) to replace it")
+    make = progress_factory or NullProgress
+    samples = []
+    for log in logs:
+        samples.append(collect_sequence(Path(log), config, progress=make()))
+    for s in samples:
+        if not (s.labels == 1).any():
+            warn(
+                f"{s.log}: no candidate track follows the truth (the drone is not learned from it)"
+            )
+    classes = {s.class_id for s in samples if s.class_id is not None}
+    unlabelled = [s.log for s in samples if s.class_id is None]
+    if classes and unlabelled:
+        warn(f"{len(unlabelled)} log(s) without {topics.CLASS}: {', '.join(map(str, unlabelled))}")
+    if len(classes) == 1:
+        warn(f"every labelled log is class {classes.pop()}: no drone-type classifier is learned")
+    info = {
+        "trained_on": [Path(s.log).name for s in samples],
+        "scan_offset_of_pass_s": config.frames.scan_offset_s,
+    }
+    model = fit_model(samples, info=info)
+    folds = (
+        cross_validate(samples, config, make()) if cross_validation and len(samples) >= 3 else []
+    )
+    if cross_validation and len(samples) < 3:
+        warn("cross-validation needs three logs or more: skipped")
+    write_model(model, out, overwrite=overwrite)
+    return TrainReport(model, folds, time.perf_counter() - started)
