@@ -19,6 +19,7 @@ from cldet.commands import (  # noqa: F401  (each module registers its commands)
     train,
 )
 from cldet.commands._app import app
+from cldet.commands.annotate import expand_optional_port
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -26,4 +27,5 @@ def main(argv: list[str] | None = None) -> None:
     from cldet.signals import raise_on_sigterm
 
     raise_on_sigterm()
-    app(args=argv if argv is not None else sys.argv[1:], prog_name="cldet")
+    args = argv if argv is not None else sys.argv[1:]
+    app(args=expand_optional_port(args), prog_name="cldet")

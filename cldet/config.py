@@ -23,6 +23,7 @@ __all__ = [
     "CldetConfig",
     "ClusteringConfig",
     "FramesConfig",
+    "SensorConfig",
     "SmoothingConfig",
     "TrackingConfig",
     "config_to_dict",
@@ -61,6 +62,30 @@ class FramesConfig(BaseModel):
         default=(0.0, 0.0, 0.0),
         description="the Avia's roll, pitch, yaw in the LiDAR's frame (degrees, about the fixed"
         " x, y, z axes), with avia_xyz_m",
+    )
+
+
+class SensorConfig(BaseModel):
+    """Where the Mid-360 stands: the z-up ``world`` frame of a log's transform tree (viewing only).
+
+    ``world`` is level (z up) with its origin on the ground right below the sensor and its x axis
+    under the sensor's heading; estimates stay in the Mid-360's frame, this only places them.
+    """
+
+    model_config = _STRICT
+
+    height_m: float = Field(
+        default=1.0,
+        ge=0,
+        le=100,
+        description="the Mid-360's height above the ground (the challenge's ground is about 1 m"
+        " below it)",
+    )
+    roll_deg: float = Field(
+        default=0.0, ge=-90, le=90, description="the sensor's tilt about its x axis (degrees)"
+    )
+    pitch_deg: float = Field(
+        default=0.0, ge=-90, le=90, description="the sensor's tilt about its y axis (degrees)"
     )
 
 
@@ -332,6 +357,7 @@ class CldetConfig(BaseModel):
 
     method: Literal["track", "cl-det"] = "track"
     frames: FramesConfig = Field(default_factory=FramesConfig)
+    sensor: SensorConfig = Field(default_factory=SensorConfig)
     background: BackgroundConfig = Field(default_factory=BackgroundConfig)
     clustering: ClusteringConfig = Field(default_factory=ClusteringConfig)
     tracking: TrackingConfig = Field(default_factory=TrackingConfig)

@@ -14,6 +14,7 @@ small foreground.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import multiprocessing.context
 import os
@@ -24,12 +25,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from cldet import __version__
-from cldet.config import CldetConfig, FramesConfig, config_to_dict
-from cldet.core.estimator import FrameDetections, SequenceEstimate
+from cldet.config import CldetConfig, FramesConfig, SensorConfig, config_to_dict
+from cldet.core.estimator import FrameDetections
 from cldet.core.frames import pair_frames
 from cldet.core.methods import make_estimator
 from cldet.core.model import LearnedModel
@@ -37,19 +39,24 @@ from cldet.core.trajectory import rms, trajectory_errors
 from cldet.errors import CldetError, FrameOrderError
 from cldet.io import topics
 from cldet.io.files import check_output, lock_file
-from cldet.io.mcap_read import open_log
+from cldet.io.mcap_append import is_replaced_channel
+from cldet.io.mcap_read import LogReader, open_log
 from cldet.io.mcap_write import LogWriter
 from cldet.io.rewrite import Addition, rewrite_log
+from cldet.io.ros import FrameTransform
 from cldet.io.sources import (
     SensorTopics,
     iter_log_clouds,
     iter_log_positions,
     select_topics,
 )
+from cldet.io.transforms import log_tree
+from cldet.live import LiveOutput
 from cldet.progress import NullProgress, Progress
+from cldet.result_channels import result_additions
 from cldet.signals import init_worker, stop_workers
-from cldet.types import ClassEstimate, Cloud, Estimate, LidarFrame, Source
-from cldet.view import NullView, RerunView, View
+from cldet.types import Cloud, Estimate, LidarFrame, Source
+from cldet.view import NullView, RerunView, TeeView, View
 
 METADATA_ANNOTATE = topics.METADATA_CONFIG
 
@@ -96,9 +103,15 @@ def _avia_extrinsic(cfg: FramesConfig) -> NDArray[np.float64] | None:
     return matrix
 
 
-def read_frames(log: Path, sensors: SensorTopics, cfg: FramesConfig) -> Iterator[LidarFrame]:
-    """The LiDAR's frames paired with the Avia's, both streamed (one pass over each topic)."""
-    lidar_frame: list[str] = []  # the LiDAR's frame id, from its first cloud
+def read_frames(
+    log: Path, sensors: SensorTopics, cfg: FramesConfig, lidar_frame: list[str] | None = None
+) -> Iterator[LidarFrame]:
+    """The LiDAR's frames paired with the Avia's, both streamed (one pass over each topic).
+
+    ``lidar_frame`` receives the LiDAR's frame id from its first cloud.
+    """
+    if lidar_frame is None:
+        lidar_frame = []
     extrinsic = _avia_extrinsic(cfg)
 
     def lidar() -> Iterator[Cloud]:
@@ -130,6 +143,7 @@ def annotate_log(
     avia: str | None = None,
     truth: str | None = None,
     model: LearnedModel | None = None,
+    live: LiveOutput | None = None,
 ) -> AnnotateReport:
     """Estimate the drone's position at every Mid-360 frame of ``log`` and write the results back.
 
@@ -153,6 +167,9 @@ def annotate_log(
         model: a model from ``cldet train`` (``track`` only): its scan-time offset and bias
             replace the configuration's, its scorer picks the drone's tracks and its classifier
             writes ``/cldet/class``.
+        live: stream each frame as it is processed (and the refined track at the end) to a
+            Rerun viewer and/or a Foxglove server (:mod:`cldet.live`), paced at the sensor's
+            rate when it says so; the outputs are written as without it.
 
     Returns:
         An :class:`AnnotateReport`.
@@ -176,23 +193,46 @@ def annotate_log(
         found = reader.list_topics()
         source_meta = reader.metadata().get(topics.METADATA_SOURCE, {})
         sensors = select_topics(reader, lidar, avia, truth)
+        tree, tf_taken = _existing_tree(reader)
+        first_ns = reader.time_range()[0]
     n_frames = found[sensors.lidar]
     sequence = source_meta.get("sequence", log.stem)
+    split = source_meta.get("split", "")
 
     view: View = NullView()
-    rrd_path: Path | None = None
-    if write_rrd:
+    live_rerun = live.rerun if live is not None else None
+    if write_rrd or live_rerun is not None:
         rrd_path = Path(rrd) if rrd is not None else output.with_suffix(".rrd")
-        view = RerunView(rrd_path, recording_name=f"cldet {sequence}")
+        view = RerunView(
+            rrd_path if write_rrd else None,
+            recording_name=f"cldet {split + '/' if split else ''}{sequence}",
+            application_id=review_application_id(log, split, sequence),
+            sensor=config.sensor,
+            max_range_m=config.frames.max_range_m,
+            live=live_rerun,
+        )
+    foxglove_view = (
+        live.foxglove_view(config.sensor, _lidar_frame_id(log, sensors.lidar))
+        if live is not None
+        else None
+    )
+    if foxglove_view is not None:
+        view = TeeView(view, foxglove_view)
     try:
         estimator = make_estimator(config, model)
         progress.start(n_frames, f"{sequence}: tracking")
         detections: list[FrameDetections] = []
+        lidar_frame: list[str] = []
         try:
-            for frame in read_frames(log, sensors, config.frames):
+            for frame in read_frames(log, sensors, config.frames, lidar_frame):
+                if live is not None:
+                    live.pace(frame.stamp_ns)
+                in_hand = time.perf_counter()
                 found_here = estimator.register_frame(frame)
                 detections.append(found_here)
                 view.log_frame(frame, found_here)
+                if live is not None:
+                    live.frame_done(frame.stamp_ns, time.perf_counter() - in_hand)
                 progress.advance()
         except FrameOrderError as err:
             raise FrameOrderError(f"{log}: {err}") from err
@@ -200,12 +240,17 @@ def annotate_log(
         view.log_result(result, detections)
         truths = list(iter_log_positions(log, sensors.truth)) if sensors.truth else []
         rms_m: float | None = None
+        truth_xyz: NDArray[np.float64] | None = None
         if truths:
             truth_ns = np.array([t.stamp_ns for t in truths], dtype=np.int64)
             truth_xyz = np.array([t.position for t in truths], dtype=np.float64)
             errors = _truth_errors(result.estimates, truth_ns, truth_xyz)
-            view.log_truth(truth_ns, truth_xyz, errors)
+            view.log_truth(truth_ns, truth_xyz, errors, _estimates_at(result.estimates, truth_ns))
             rms_m = None if errors is None else rms(errors)
+        frame_id = lidar_frame[0] if lidar_frame else topics.FRAME_MID360
+        additions = result_additions(result, detections, frame_id=frame_id, truth=truth_xyz)
+        if tree is None:  # a log without a frame tree gets one (replaced by the next run)
+            additions.append((first_ns, _tree_writer(tf_taken, frame_id, config.sensor, first_ns)))
         metadata = {
             METADATA_ANNOTATE: {
                 "method": config.method,
@@ -222,7 +267,7 @@ def annotate_log(
         rewrite_log(
             log,
             output,
-            result_additions(result, detections),
+            additions,
             metadata=metadata,
             replace_metadata=(METADATA_ANNOTATE,),
         )
@@ -256,86 +301,67 @@ def _truth_errors(
     return trajectory_errors(truth_ns, truth_xyz, stamps, positions)
 
 
-def result_additions(
-    result: SequenceEstimate, detections: Sequence[FrameDetections]
-) -> list[tuple[int, Addition]]:
-    """The ``/cldet/*`` messages of one annotate run, as ``(log_time_ns, write)`` pairs.
-
-    - ``/cldet/estimate`` (cldet.Estimate) and ``/cldet/pose`` (foxglove.PoseInFrame)
-      per estimate of the refined track;
-    - ``/cldet/causal`` (cldet.Estimate): the causal estimate of each frame, as it was made
-      from that frame and the ones before (what a live run shows);
-    - ``/cldet/class`` (cldet.ClassEstimate), with a model: the drone type and every class's
-      probability from the chosen track's evidence up to each second, the last one final;
-    - ``/cldet/trajectory`` (foxglove.PosesInFrame): the whole smoothed trajectory, once, at the
-      first frame's stamp, so a viewer shows it for the whole playback;
-    - ``/cldet/clusters`` (foxglove.SceneUpdate) per frame: a box and label per cluster, the
-      chosen one as a separate green ``drone`` entity;
-    - ``/cldet/foreground`` (foxglove.PointCloud x, y, z, cluster_id) per frame.
-    """
-    frame_id = topics.FRAME_MID360
-    additions: list[tuple[int, Addition]] = []
-    for est in result.estimates:
-        additions.append((est.stamp_ns, _estimate_writer(est)))
-    for est in result.causal:
-        additions.append((est.stamp_ns, _causal_writer(est)))
-    for cls in result.classes:
-        additions.append((cls.stamp_ns, _class_writer(cls)))
-    if result.estimates:
-        first = result.estimates[0].stamp_ns
-        positions = np.array([e.position for e in result.estimates], dtype=np.float64)
-        additions.append(
-            (first, lambda w: w.write_poses(topics.TRAJECTORY, first, positions, frame_id))
-        )
-    for det in detections:
-        chosen_id = result.chosen.get(det.stamp_ns)
-        additions.append((det.stamp_ns, _clusters_writer(det, chosen_id)))
-    return additions
+def review_application_id(log: Path, split: str, sequence: str) -> str:
+    """The Rerun application id of a log's review recording: one per log, so that the viewer
+    keeps a blueprint per log (not one shared by every ``seq0001`` of every split)."""
+    digest = hashlib.sha1(str(Path(log).resolve()).encode()).hexdigest()[:8]
+    return "-".join(p for p in ("cldet", split, sequence, digest) if p)
 
 
-def _estimate_writer(est: Estimate) -> Addition:
+def _estimates_at(
+    estimates: Sequence[Estimate], stamps_ns: NDArray[np.int64]
+) -> NDArray[np.float64] | None:
+    """(K, 3) the estimated trajectory at ``stamps_ns`` (None without estimates)."""
+    from cldet.core.trajectory import evaluate_trajectory
+
+    if not estimates:
+        return None
+    stamps = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
+    positions = np.array([e.position for e in estimates], dtype=np.float64)
+    return np.asarray(evaluate_trajectory(stamps, positions, stamps_ns), dtype=np.float64)
+
+
+def _lidar_frame_id(log: Path, topic: str) -> str:
+    """The frame id of the LiDAR's first cloud (the Mid-360's when the topic is empty)."""
+    for cloud in iter_log_clouds(log, topic):
+        return cloud.frame_id or topics.FRAME_MID360
+    return topics.FRAME_MID360
+
+
+def _existing_tree(reader: LogReader) -> tuple[list[FrameTransform] | None, bool]:
+    """The log's own static frame tree (``foxglove.FrameTransforms`` on channels that are not
+    results of an earlier run; None without one), and whether its ``/tf`` topic is taken by
+    such a channel (e.g. ROS transforms)."""
+    kinds = reader.topic_types()
+    wanted = [t for t, kind in kinds.items() if kind == topics.SCHEMA_FRAME_TRANSFORMS]
+    if topics.TF in kinds and topics.TF not in wanted:
+        wanted.append(topics.TF)
+    out: list[FrameTransform] = []
+    tf_taken = False
+    tf_seen = False
+    for _, channel, message in reader.iter_messages(wanted) if wanted else ():
+        if is_replaced_channel(channel, "/cldet/"):
+            tf_seen = tf_seen or channel.topic == topics.TF
+            continue
+        if channel.topic == topics.TF:
+            tf_taken = tf_seen = True
+        if kinds.get(channel.topic) == topics.SCHEMA_FRAME_TRANSFORMS:
+            for t in FrameTransforms.FromString(message.data).transforms:
+                out.append(FrameTransform(t.parent_frame_id, t.child_frame_id, np.eye(4)))
+    if topics.TF in kinds and not tf_seen:
+        tf_taken = True  # a /tf channel without messages: leave it alone
+    return out or None, tf_taken
+
+
+def _tree_writer(tf_taken: bool, lidar_frame: str, sensor: SensorConfig, stamp_ns: int) -> Addition:
+    """Writes the frame tree of a log that has none, on ``/tf`` (``/cldet/tf`` when the log's
+    ``/tf`` is taken, e.g. by ROS transforms), marked as a result."""
+    topic = "/cldet/tf" if tf_taken else topics.TF
+    tree = log_tree(lidar_frame, sensor)
+
     def write(writer: LogWriter) -> None:
-        writer.write_estimate(topics.ESTIMATE, est.stamp_ns, est)
-        writer.write_pose(topics.POSE, est.stamp_ns, est.position, topics.FRAME_MID360)
-
-    return write
-
-
-def _class_writer(estimate: ClassEstimate) -> Addition:
-    def write(writer: LogWriter) -> None:
-        writer.write_class_estimate(topics.CLASS_ESTIMATE, estimate)
-
-    return write
-
-
-def _causal_writer(est: Estimate) -> Addition:
-    def write(writer: LogWriter) -> None:
-        writer.write_estimate(topics.CAUSAL, est.stamp_ns, est)
-
-    return write
-
-
-def _clusters_writer(det: FrameDetections, chosen_id: int | None) -> Addition:
-    def write(writer: LogWriter) -> None:
-        cloud = np.column_stack([det.foreground, det.labels.astype(np.float32)])
-        writer.write_cloud(
-            topics.FOREGROUND,
-            det.stamp_ns,
-            cloud,
-            topics.FRAME_MID360,
-            fields=("x", "y", "z", "cluster_id"),
-        )
-        others = [c for c in det.clusters if c.cluster_id != chosen_id]
-        writer.write_scene_update(topics.CLUSTERS, det.stamp_ns, others, topics.FRAME_MID360)
-        chosen = [c for c in det.clusters if c.cluster_id == chosen_id]
-        writer.write_scene_update(
-            topics.CLUSTERS,
-            det.stamp_ns,
-            chosen,
-            topics.FRAME_MID360,
-            labels=[f"drone ({c.n_points} pts)" for c in chosen],
-            color=(0.1, 0.9, 0.2, 0.8),
-            entity_id="drone",
+        writer.write_transforms(
+            topic, stamp_ns, tree, channel_metadata={topics.RESULT_CHANNEL_KEY: "annotate"}
         )
 
     return write
@@ -354,6 +380,7 @@ def annotate_log_locked(
     avia: str | None = None,
     truth: str | None = None,
     model: LearnedModel | None = None,
+    live: LiveOutput | None = None,
 ) -> AnnotateReport:
     """:func:`annotate_log` while holding an exclusive lock on the log (a second run refuses).
 
@@ -378,6 +405,7 @@ def annotate_log_locked(
             avia=avia,
             truth=truth,
             model=model,
+            live=live,
         )
 
 

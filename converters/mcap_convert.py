@@ -2,7 +2,8 @@
 
 ``OUT/<split>/<seqNNNN>.mcap`` holds one channel per modality found (see :mod:`cldet.io.topics`):
 point clouds with their valid points only (float32), ground truth as poses, class labels, images
-as PNG plus a camera calibration, and a ``cldet.source`` metadata record. Every message's log
+as PNG plus a camera calibration, the static frame tree on ``/tf`` (see
+:mod:`cldet.io.transforms`) and a ``cldet.source`` metadata record. Every message's log
 time, publish time and own timestamp are the source file's stamp in integer nanoseconds.
 
 Conversion streams frame by frame (memory stays flat whatever the sequence length), runs
@@ -28,6 +29,7 @@ from cldet import __version__
 from cldet.errors import CldetError, DatasetError, LogError
 from cldet.io import topics
 from cldet.io.mcap_write import Compression, LogWriter, atomic_output
+from cldet.io.transforms import sensor_tree
 from cldet.progress import NullProgress, Progress
 from cldet.signals import init_worker, stop_workers
 from cldet.stamps import format_stamp
@@ -130,8 +132,12 @@ def convert_sequence(
     bar = progress if progress is not None else NullProgress()
     modalities = _modalities(seq, images)
     counts = dict.fromkeys(modalities, 0)
+    tree_written = False
     for modality, item in mmaud.iter_sequence(seq, modalities):
         topic = topics.MODALITY_TOPICS[modality]
+        if not tree_written:  # the static frame tree, at the first stamp (cldet.io.transforms)
+            writer.write_transforms(topics.TF, item.stamp_ns, sensor_tree())
+            tree_written = True
         if isinstance(item, Cloud):
             writer.write_cloud(topic, item.stamp_ns, item.points, topics.MODALITY_FRAMES[modality])
         elif isinstance(item, PositionSample):

@@ -25,6 +25,7 @@ from cldet import __version__
 from cldet.errors import CldetError, DatasetError
 from cldet.io import ros, topics
 from cldet.io.mcap_write import Compression, LogWriter, atomic_output
+from cldet.io.transforms import sensor_tree
 from cldet.progress import NullProgress, Progress
 
 __all__ = ["BagTopics", "convert_bag", "is_bag"]
@@ -151,7 +152,11 @@ def convert_bag(
         counts = dict.fromkeys(targets.values(), 0)
         bar.start(sum(reader.topics[t].msgcount for t in targets), f"{Path(bag).name}: converting")
         lidar_frame: list[str] = []
+        tree_written = False
         for stamp_ns, channel, item in _in_stamp_order(_items(bag, reader, targets)):
+            if not tree_written:  # the static frame tree, at the first stamp
+                writer.write_transforms(topics.TF, stamp_ns, sensor_tree())
+                tree_written = True
             if isinstance(item, ros.StampedCloud):
                 points = item.points
                 if channel == topics.LIDAR_360 and not lidar_frame:

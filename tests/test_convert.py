@@ -228,7 +228,7 @@ def test_real_sample_round_trips(real_sample: Path, tmp_path: Path) -> None:
     log = tmp_path / "val" / "seq0001.mcap"
     check_log(log, real_sample / "val" / "seq0001")
     counts = list_topics(log)
-    assert counts == {tp.LIDAR_360: 88, tp.LIVOX_AVIA: 88, tp.RADAR: 132}
+    assert counts == {tp.TF: 1, tp.LIDAR_360: 88, tp.LIVOX_AVIA: 88, tp.RADAR: 132}
     assert report.bytes_out < report.bytes_in / 10  # valid float32 rows only, compressed
 
 

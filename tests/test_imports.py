@@ -42,6 +42,8 @@ PREFIXES: tuple[tuple[str, str], ...] = (
     ("cldet.calibrate", "step"),
     ("cldet.explore", "step"),
     ("cldet.view", "view"),
+    ("cldet.live", "view"),  # streams what the review and the log show
+    ("cldet.result_channels", "view"),  # the /cldet/* messages, for the log and the live view
     ("cldet.simulate", "simulate"),
     ("converters", "converters"),
     ("cldet.io", "io"),

@@ -51,9 +51,16 @@ def test_annotate_adds_result_channels_and_keeps_sources_byte_identical(
     counts = list_topics(out)
     n_frames = counts[topics.LIDAR_360]
     assert report.frames == n_frames
-    for topic in (topics.ESTIMATE, topics.CAUSAL, topics.POSE, topics.FOREGROUND):
+    for topic in (
+        topics.ESTIMATE,
+        topics.CAUSAL,
+        topics.POSE,
+        topics.FOREGROUND,
+        topics.DRONE,
+        topics.CENTROIDS,
+    ):
         assert counts[topic] == n_frames, topic
-    assert counts[topics.TRAJECTORY] == 1
+    assert counts[topics.TRAJECTORY] == counts[topics.TRACK] == counts[topics.TRUTH_TRACK] == 1
     assert counts[topics.CLUSTERS] == 2 * n_frames  # the other clusters and the chosen one
     with open(out, "rb") as f:
         summary = make_reader(f).get_summary()
@@ -70,6 +77,10 @@ def test_annotate_adds_result_channels_and_keeps_sources_byte_identical(
         topics.TRAJECTORY: "foxglove.PosesInFrame",
         topics.CLUSTERS: "foxglove.SceneUpdate",
         topics.FOREGROUND: "foxglove.PointCloud",
+        topics.DRONE: "foxglove.PointCloud",
+        topics.TRACK: "foxglove.PointCloud",
+        topics.TRUTH_TRACK: "foxglove.PointCloud",
+        topics.CENTROIDS: "foxglove.PointCloud",
     }
     estimates = [e for e, _ in iter_estimates(out)]
     assert [e.stamp_ns for e in estimates] == [m[1] for m in before if m[0] == topics.LIDAR_360]
@@ -144,6 +155,8 @@ def test_review_recording_has_the_entities_and_verifies(source_log: Path, tmp_pa
         "/world/drone/estimate",
         "/world/drone/trajectory",
         "/world/truth/trajectory",
+        "/world/truth/position",
+        "/world/truth/error",
         "/plots/error_m",
     }
     assert expected <= paths, expected - paths

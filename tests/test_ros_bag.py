@@ -198,7 +198,7 @@ def test_a_ros2_bag_folder_converts_to_the_same_log(
     result = cli_run("convert", folder, "-o", tmp_path / "logs", "--lidar-topic", "/livox/lidar")
     assert result.exit_code == 0, result.output
     log = tmp_path / "logs" / "flight2.mcap"
-    assert set(list_topics(log)) == {topics.LIDAR_360, topics.GROUND_TRUTH}
+    assert set(list_topics(log)) == {topics.TF, topics.LIDAR_360, topics.GROUND_TRUTH}
     expected = list(mmaud.iter_clouds(sequence, "lidar_360"))
     got = list(iter_clouds(log, topics.LIDAR_360))
     assert [c.stamp_ns for c in got] == [c.stamp_ns for c in expected]

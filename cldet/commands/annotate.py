@@ -100,6 +100,39 @@ def annotate(
             "/cldet/class. Default: the hand-set scorer, no type.",
         ),
     ] = None,
+    live: Annotated[
+        bool,
+        typer.Option(
+            "--live",
+            help="Stream each frame (clouds, foreground, clusters, causal estimate) while it is "
+            "processed, then the refined track, to a Rerun viewer (spawned, or --connect) and "
+            "with --foxglove to Foxglove; print each frame's latency. One log only.",
+        ),
+    ] = False,
+    realtime: Annotated[
+        bool, typer.Option("--realtime", help="With --live: pace the frames at the sensor's rate.")
+    ] = False,
+    connect: Annotated[
+        str | None,
+        typer.Option(
+            metavar="URL",
+            help="With --live: stream to this Rerun viewer's gRPC URL (e.g. "
+            "rerun+http://127.0.0.1:9876/proxy) instead of spawning one.",
+        ),
+    ] = None,
+    no_rerun: Annotated[
+        bool, typer.Option("--no-rerun", help="With --live: no Rerun viewer (Foxglove only).")
+    ] = False,
+    foxglove: Annotated[
+        int | None,
+        typer.Option(
+            metavar="[PORT]",
+            min=0,
+            max=65535,
+            help="With --live: serve Foxglove's WebSocket protocol on 127.0.0.1:PORT (default "
+            "8765; 0: any free port); connect Foxglove to ws://127.0.0.1:PORT.",
+        ),
+    ] = None,
 ) -> None:
     """Estimate the drone's 3D position at every Mid-360 frame and add the results to each log.
 
@@ -108,8 +141,10 @@ def annotate(
     an earlier annotation is replaced. New channels:
     /cldet/estimate, /cldet/pose, /cldet/trajectory, /cldet/clusters, /cldet/foreground,
     /cldet/causal (the per-frame estimate as a live run makes it), /cldet/class with --model
-    (the drone type and its probabilities, updated every second), and a `cldet.config`
-    metadata record with the method and effective configuration.
+    (the drone type and its probabilities, updated every second), point-cloud copies Rerun
+    draws too (/cldet/drone, /cldet/track, /cldet/truth_track, /cldet/centroids), a /tf frame
+    tree when the log has none, and a `cldet.config` metadata record with the method and
+    effective configuration.
 
     ROS 2 recordings (`ros2 bag record` writes MCAP) are read as they are: name the topics,
     e.g. `cldet annotate rec.mcap --lidar /livox/lidar --avia /livox/avia`. Each frame is dated
@@ -138,6 +173,25 @@ def annotate(
             raise CldetError(f"--model goes with the track method, not {cfg.method}")
         if (output is not None or rrd is not None) and len(logs) != 1:
             raise CldetError("-o/--output and --rrd go with exactly one log")
+        if not live and (realtime or connect or no_rerun or foxglove is not None):
+            raise CldetError("--realtime, --connect, --no-rerun and --foxglove go with --live")
+        if live:
+            _annotate_live(
+                logs,
+                cfg,
+                output=output,
+                rrd=rrd,
+                write_rrd=not no_rrd,
+                force=force,
+                lidar=lidar,
+                avia=avia,
+                truth=truth,
+                model=learned,
+                realtime=realtime,
+                rerun=None if no_rerun else (connect or "spawn"),
+                foxglove=foxglove,
+            )
+            return
         with BarProgress() as bar:
             if len(logs) == 1:
                 report = annotate_log_locked(
@@ -174,3 +228,55 @@ def annotate(
                 echo_err(f"FAILED {log}: {message}")
             echo_err(f"ERROR: {len(failures)} of {len(logs)} logs failed")
             raise typer.Exit(1)
+
+
+def _annotate_live(
+    logs: list[Path],
+    cfg: object,
+    *,
+    rerun: str | None,
+    foxglove: int | None,
+    realtime: bool,
+    **options: object,
+) -> None:
+    """``--live``: one log, streamed frame by frame; the per-frame latency printed."""
+    import sys
+
+    from cldet.config import CldetConfig
+    from cldet.errors import CldetError
+    from cldet.live import LiveOutput
+    from cldet.pipeline import annotate_log_locked
+
+    if len(logs) != 1:
+        raise CldetError("--live goes with exactly one log")
+    if rerun is None and foxglove is None:
+        raise CldetError("--live with --no-rerun needs --foxglove: there is nowhere to stream")
+    assert isinstance(cfg, CldetConfig)
+
+    def on_frame(stamp_ns: int, latency_s: float) -> None:
+        typer.echo(f"frame {stamp_ns}: {latency_s * 1e3:.1f} ms")
+
+    live = LiveOutput(rerun=rerun, foxglove_port=foxglove, realtime=realtime, on_frame=on_frame)
+    try:
+        if live.foxglove_port is not None:
+            typer.echo(f"Foxglove: open a connection to ws://127.0.0.1:{live.foxglove_port}")
+        report = annotate_log_locked(logs[0], config=cfg, live=live, **options)  # type: ignore[arg-type]
+        typer.echo(live.latency_summary())
+        typer.echo(report.describe())
+        if live.foxglove_port is not None and sys.stdin.isatty():
+            typer.echo("serving the results to Foxglove: press Enter to stop")
+            sys.stdin.readline()
+    finally:
+        live.close()
+
+
+def expand_optional_port(
+    args: list[str], flag: str = "--foxglove", default: int = 8765
+) -> list[str]:
+    """``--foxglove`` without a port number gets the default one (Typer options need a value)."""
+    out: list[str] = []
+    for i, arg in enumerate(args):
+        out.append(arg)
+        if arg == flag and not (i + 1 < len(args) and args[i + 1].isdigit()):
+            out.append(str(default))
+    return out

@@ -45,7 +45,9 @@ from mcap.records import (
 )
 from mcap.summary import Summary
 
-__all__ = ["AppendPlan", "AppendWriter", "copy_prefix", "plan_append"]
+from cldet.io.topics import RESULT_CHANNEL_KEY
+
+__all__ = ["AppendPlan", "AppendWriter", "copy_prefix", "is_replaced_channel", "plan_append"]
 
 MAGIC = b"\x89MCAP0\r\n"
 _FOOTER_LEN = 1 + 8 + 8 + 8 + 4  # opcode, length, summary_start, summary_offset_start, crc
@@ -171,7 +173,9 @@ def plan_append(
     stream.seek(data_end)
     if stream.read(1) != bytes([Opcode.DATA_END]):
         return None
-    replaced = {cid for cid, c in summary.channels.items() if c.topic.startswith(replace_prefix)}
+    replaced = {
+        cid for cid, c in summary.channels.items() if is_replaced_channel(c, replace_prefix)
+    }
     old_chunks = [c for c in chunks if replaced.intersection(c.message_index_offsets)]
     old_meta = [m for m in summary.metadata_indexes if m.name in replace_metadata]
     cut = min(
@@ -207,6 +211,12 @@ def plan_append(
         next_schema_id=max(summary.schemas, default=0) + 1,
         next_channel_id=max(summary.channels, default=-1) + 1,
     )
+
+
+def is_replaced_channel(channel: Channel, replace_prefix: str) -> bool:
+    """True for a result channel a new append replaces: its topic starts with ``replace_prefix``,
+    or its metadata marks it as a result (``cldet.result``), e.g. a ``/tf`` annotate added."""
+    return channel.topic.startswith(replace_prefix) or RESULT_CHANNEL_KEY in channel.metadata
 
 
 def copy_prefix(source: IO[bytes], target: IO[bytes], length: int) -> None:

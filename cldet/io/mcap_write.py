@@ -24,6 +24,7 @@ from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.Color_pb2 import Color
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.CubePrimitive_pb2 import CubePrimitive
+from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
 from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from foxglove_schemas_protobuf.Pose_pb2 import Pose
@@ -44,6 +45,7 @@ from cldet.errors import LogError
 from cldet.io import topics
 from cldet.io.files import atomic_output
 from cldet.io.mcap_append import AppendPlan, AppendWriter
+from cldet.io.ros import FrameTransform
 from cldet.io.schemas import ClassEstimateMessage, ClassLabel, file_descriptor_set
 from cldet.io.schemas import Estimate as EstimateMessage
 from cldet.stamps import NS_PER_S
@@ -144,6 +146,10 @@ class LogWriter:
         continues: continue an existing log instead of starting one: ``stream`` already holds
             the log's first ``continues.cut`` bytes (see :mod:`cldet.io.mcap_append`); new
             records follow them, then a summary covering the old records and the new.
+        backend: send the records to this object instead of an MCAP file on ``stream`` (it
+            offers the methods of ``mcap.writer.Writer`` this class calls: ``start``,
+            ``register_schema``, ``register_channel``, ``add_message``, ``add_metadata``,
+            ``finish``), e.g. a live WebSocket server (:mod:`cldet.live`).
 
     Every ``write_*`` method takes ``stamp_ns``, integer nanoseconds since the Unix epoch, used
     exactly as log time, publish time and the message's ``timestamp``.
@@ -157,6 +163,7 @@ class LogWriter:
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         profile: str = "",
         continues: AppendPlan | None = None,
+        backend: Any = None,
     ) -> None:
         try:
             self.compression = Compression(compression)
@@ -170,8 +177,10 @@ class LogWriter:
         if isinstance(stream, io.RawIOBase):  # buffer raw streams ourselves, flushed in finish()
             self._buffer = io.BufferedWriter(stream)
             self._stream = self._buffer
-        self._mcap: McapWriter | AppendWriter
-        if continues is None:
+        self._mcap: Any
+        if backend is not None:
+            self._mcap = backend
+        elif continues is None:
             self._mcap = McapWriter(
                 self._stream,
                 chunk_size=chunk_size,
@@ -222,7 +231,9 @@ class LogWriter:
             self._schemas[name] = schema_id
         return schema_id
 
-    def _channel(self, topic: str, message_class: Any) -> int:
+    def _channel(
+        self, topic: str, message_class: Any, metadata: Mapping[str, str] | None = None
+    ) -> int:
         name: str = message_class.DESCRIPTOR.full_name
         found = self._channels.get(topic)
         if found is not None:
@@ -232,7 +243,10 @@ class LogWriter:
             return channel_id
         schema_id = self._schema_id(name, file_descriptor_set(message_class))
         channel_id = self._mcap.register_channel(
-            topic=topic, message_encoding=topics.MESSAGE_ENCODING, schema_id=schema_id
+            topic=topic,
+            message_encoding=topics.MESSAGE_ENCODING,
+            schema_id=schema_id,
+            metadata=dict(metadata or {}),
         )
         self._channels[topic] = (channel_id, name)
         return channel_id
@@ -246,9 +260,19 @@ class LogWriter:
         self._mcap.add_message(channel_id=channel_id, log_time=stamp, data=data, publish_time=stamp)
         self._counts[topic] = self._counts.get(topic, 0) + 1
 
-    def write_message(self, topic: str, stamp_ns: int, message: Message) -> None:
-        """Write any protobuf message; its type's ``FileDescriptorSet`` becomes the schema."""
-        channel_id = self._channel(topic, type(message))
+    def write_message(
+        self,
+        topic: str,
+        stamp_ns: int,
+        message: Message,
+        *,
+        channel_metadata: Mapping[str, str] | None = None,
+    ) -> None:
+        """Write any protobuf message; its type's ``FileDescriptorSet`` becomes the schema.
+
+        ``channel_metadata`` goes into the channel record when this call creates the channel.
+        """
+        channel_id = self._channel(topic, type(message), channel_metadata)
         self._add(channel_id, topic, stamp_ns, message.SerializeToString())
 
     def write_raw(
@@ -340,6 +364,66 @@ class LogWriter:
             stamp_ns,
             layout.serialize(int(stamp_ns), data.reshape(-1).view(np.uint8).data),
         )
+
+    def write_colored_cloud(
+        self,
+        topic: str,
+        stamp_ns: int,
+        points: ArrayLike,
+        colors: ArrayLike,
+        frame_id: str,
+    ) -> None:
+        """Write a ``foxglove.PointCloud`` with a colour per point, drawn so by both viewers.
+
+        Args:
+            points: (N, 3) metres, stored as float32 x, y, z at offsets 0, 4, 8.
+            colors: (N, 4) or (4,) RGBA 0..255, stored as uint8 ``red``, ``green``, ``blue``,
+                ``alpha`` at offsets 12..15 (the fields Foxglove and Rerun both read).
+        """
+        xyz = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        rgba = np.broadcast_to(np.asarray(colors, dtype=np.uint8), (len(xyz), 4))
+        packed = np.empty(len(xyz), dtype=[("xyz", "<f4", 3), ("rgba", "u1", 4)])
+        packed["xyz"] = xyz
+        packed["rgba"] = rgba
+        msg = PointCloud(timestamp=_timestamp(int(stamp_ns)), frame_id=frame_id, point_stride=16)
+        _identity_pose(msg.pose)
+        for i, name in enumerate(_XYZ):
+            msg.fields.add(name=name, offset=4 * i, type=PackedElementField.FLOAT32)
+        for i, name in enumerate(("red", "green", "blue", "alpha")):
+            msg.fields.add(name=name, offset=12 + i, type=PackedElementField.UINT8)
+        msg.data = packed.tobytes()
+        self.write_message(topic, stamp_ns, msg)
+
+    def write_transforms(
+        self,
+        topic: str,
+        stamp_ns: int,
+        transforms: Sequence[FrameTransform],
+        *,
+        channel_metadata: Mapping[str, str] | None = None,
+    ) -> None:
+        """Write a ``foxglove.FrameTransforms``: each transform takes ``child`` into ``parent``.
+
+        Translation and rotation are always present on the wire (a zero translation too), which
+        Rerun's MCAP import needs.
+        """
+        from scipy.spatial.transform import Rotation
+
+        stamp = int(stamp_ns)
+        msg = FrameTransforms()
+        for t in transforms:
+            out = msg.transforms.add(
+                timestamp=_timestamp(stamp), parent_frame_id=t.parent, child_frame_id=t.child
+            )
+            out.translation.SetInParent()
+            out.translation.x, out.translation.y, out.translation.z = (
+                float(v) for v in t.matrix[:3, 3]
+            )
+            qx, qy, qz, qw = Rotation.from_matrix(t.matrix[:3, :3]).as_quat()
+            out.rotation.SetInParent()
+            out.rotation.x, out.rotation.y, out.rotation.z = float(qx), float(qy), float(qz)
+            out.rotation.w = float(qw)
+        self.write_message(topic, stamp, msg, channel_metadata=channel_metadata)
 
     def write_pose(self, topic: str, stamp_ns: int, position: ArrayLike, frame_id: str) -> None:
         """Write a ``foxglove.PoseInFrame`` at ``position`` (3,) metres, identity orientation."""

@@ -25,7 +25,7 @@ from mcap.records import Attachment, Channel, Message, Metadata, Schema
 
 from cldet.errors import LogError
 from cldet.io.files import atomic_output, resolve_link, temporary_path
-from cldet.io.mcap_append import AppendPlan, copy_prefix, plan_append
+from cldet.io.mcap_append import AppendPlan, copy_prefix, is_replaced_channel, plan_append
 from cldet.io.mcap_read import LogReader, open_log
 from cldet.io.mcap_write import Compression, LogWriter
 
@@ -152,7 +152,7 @@ def _copy_without(
                         f"{reader.path}: a message at {record.log_time} ns on channel "
                         f"{record.channel_id}, which no earlier channel record defines"
                     )
-                if channel.topic.startswith(replace_prefix):
+                if is_replaced_channel(channel, replace_prefix):
                     dropped += 1
                     continue
                 writer.write_raw(

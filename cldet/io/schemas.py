@@ -40,9 +40,8 @@ def _field(
     field.type = kind
     if type_name:
         field.type_name = type_name
-    field.json_name = "".join(
-        part if i == 0 else part.capitalize() for i, part in enumerate(name.split("_"))
-    )
+    # no json_name: protobufjs (Foxglove's tools) would show it (``nPoints``) where Foxglove's
+    # own decoder shows the field name (``n_points``)
 
 
 def _file_descriptor_proto() -> descriptor_pb2.FileDescriptorProto:

@@ -18,6 +18,7 @@ GROUND_TRUTH: Final = "/ground_truth"  # foxglove.PoseInFrame, Leica MS60 (train
 CLASS: Final = "/class"  # cldet.ClassLabel, drone type 0..3 (train only)
 IMAGE: Final = "/image"  # foxglove.CompressedImage, PNG, two fisheyes side by side
 IMAGE_CALIBRATION: Final = "/image/calibration"  # foxglove.CameraCalibration for IMAGE
+TF: Final = "/tf"  # foxglove.FrameTransforms: the static frame tree, once at the first stamp
 
 # dataset folder name (converters.mmaud modality) -> topic
 MODALITY_TOPICS: Final[dict[str, str]] = {
@@ -34,14 +35,24 @@ CLOUD_TOPICS: Final = (LIDAR_360, LIVOX_AVIA, RADAR)
 ESTIMATE: Final = "/cldet/estimate"  # cldet.Estimate, one per Mid-360 frame (refined track)
 CAUSAL: Final = "/cldet/causal"  # cldet.Estimate, the causal estimate as it was made per frame
 CLASS_ESTIMATE: Final = "/cldet/class"  # cldet.ClassEstimate, the drone type (with --model)
-POSE: Final = "/cldet/pose"  # foxglove.PoseInFrame, drawn by both viewers
-TRAJECTORY: Final = "/cldet/trajectory"  # foxglove.PosesInFrame, the track so far
+POSE: Final = "/cldet/pose"  # foxglove.PoseInFrame (Foxglove draws it; Rerun: see DRONE)
+TRAJECTORY: Final = "/cldet/trajectory"  # foxglove.PosesInFrame, the track (Rerun: TRACK)
 FOREGROUND: Final = "/cldet/foreground"  # foxglove.PointCloud x,y,z,cluster_id
 CLUSTERS: Final = "/cldet/clusters"  # foxglove.SceneUpdate, cluster boxes + labels
+# the same results as point clouds, which Rerun's MCAP import draws too (it draws PointCloud,
+# not PoseInFrame, PosesInFrame or SceneUpdate); x,y,z float32 + red,green,blue,alpha uint8
+DRONE: Final = "/cldet/drone"  # foxglove.PointCloud, 1 point per frame, coloured by source
+TRACK: Final = "/cldet/track"  # foxglove.PointCloud, the whole refined track once (magenta)
+TRUTH_TRACK: Final = "/cldet/truth_track"  # foxglove.PointCloud, the ground truth once (white)
+CENTROIDS: Final = "/cldet/centroids"  # foxglove.PointCloud, cluster centres (chosen: green)
+# channel metadata marking a channel as a result that the next annotate run replaces (for one
+# outside /cldet/, e.g. the /tf annotate adds to a log that has none)
+RESULT_CHANNEL_KEY: Final = "cldet.result"
 
-# --- coordinate frames -----------------------------------------------------------------------
+# --- coordinate frames (one tree on /tf, see cldet.io.transforms) ----------------------------
+FRAME_WORLD: Final = "world"  # level, z up, on the ground below the Mid-360: the tree's root
 FRAME_MID360: Final = "mid360"  # the Mid-360's frame: metres, z up; both LiDARs and the GT
-FRAME_RADAR: Final = "radar"  # the radar's own frame (z = boresight; transform unknown)
+FRAME_RADAR: Final = "radar"  # the radar's own frame (z = boresight; approximate extrinsic)
 FRAME_CAMERA: Final = "fisheye"  # the side-by-side fisheye image pair
 
 MODALITY_FRAMES: Final[dict[str, str]] = {
@@ -61,6 +72,7 @@ SCHEMA_POSES_IN_FRAME: Final = "foxglove.PosesInFrame"
 SCHEMA_COMPRESSED_IMAGE: Final = "foxglove.CompressedImage"
 SCHEMA_CAMERA_CALIBRATION: Final = "foxglove.CameraCalibration"
 SCHEMA_SCENE_UPDATE: Final = "foxglove.SceneUpdate"
+SCHEMA_FRAME_TRANSFORMS: Final = "foxglove.FrameTransforms"
 SCHEMA_CLASS_LABEL: Final = "cldet.ClassLabel"
 SCHEMA_ESTIMATE: Final = "cldet.Estimate"
 SCHEMA_CLASS_ESTIMATE: Final = "cldet.ClassEstimate"
