@@ -28,7 +28,8 @@ from typing import Any
 from cldet import __version__
 from cldet.errors import CldetError, DatasetError, LogError
 from cldet.io import topics
-from cldet.io.mcap_write import Compression, LogWriter, atomic_output
+from cldet.io.files import atomic_output
+from cldet.io.mcap_write import Compression, LogWriter
 from cldet.io.transforms import sensor_tree
 from cldet.progress import NullProgress, Progress
 from cldet.signals import init_worker, stop_workers

@@ -24,7 +24,8 @@ from rosbags.highlevel import AnyReader, AnyReaderError
 from cldet import __version__
 from cldet.errors import CldetError, DatasetError
 from cldet.io import ros, topics
-from cldet.io.mcap_write import Compression, LogWriter, atomic_output
+from cldet.io.files import atomic_output
+from cldet.io.mcap_write import Compression, LogWriter
 from cldet.io.transforms import sensor_tree
 from cldet.progress import NullProgress, Progress
 

@@ -43,7 +43,6 @@ from numpy.typing import ArrayLike
 from cldet import __version__
 from cldet.errors import LogError
 from cldet.io import topics
-from cldet.io.files import atomic_output
 from cldet.io.mcap_append import AppendPlan, AppendWriter
 from cldet.io.ros import FrameTransform
 from cldet.io.schemas import ClassEstimateMessage, ClassLabel, file_descriptor_set
@@ -51,7 +50,7 @@ from cldet.io.schemas import Estimate as EstimateMessage
 from cldet.stamps import NS_PER_S
 from cldet.types import ClassEstimate, Cluster, Estimate
 
-__all__ = ["Compression", "LogWriter", "atomic_output", "png_size"]
+__all__ = ["Compression", "LogWriter", "png_size"]
 
 DEFAULT_CHUNK_SIZE = 1 << 20  # bytes of uncompressed messages per chunk: ~20 Mid-360 frames
 
@@ -135,7 +134,7 @@ class LogWriter:
 
     A context manager: on a clean exit the log is finished (indexes, summary, footer) and the
     stream flushed; after an exception nothing more is written, since such a file is to be
-    discarded (see :func:`atomic_output`). The stream is never closed: whoever opened it owns it.
+    discarded (see :func:`cldet.io.files.atomic_output`). The stream is never closed: whoever opened it owns it.
 
     Args:
         stream: an open binary stream (a file opened ``"wb"``, a ``BytesIO``), at its start.
