@@ -40,7 +40,7 @@ def model_bytes(model: LearnedModel) -> bytes:
     meta = {
         "format": MODEL_FORMAT,
         "kind": "cldet-model",
-        "feature_names": list(model.feature_names),
+        "feature_names": list(FEATURE_NAMES),
         "type_feature_names": list(TYPE_FEATURES),
         "class_ids": [int(c) for c in model.class_ids],
         "scan_offset_s": float(model.scan_offset_s),

@@ -14,10 +14,12 @@ estimator's per-frame verb with the configuration given and keeps its candidate 
 - the **centroid bias** (along the ray and in z, as ``cldet calibrate``) from the same pairs;
 - the **drone-vs-clutter scorer**: gradient-boosted trees over the tracks' physical features
   (:data:`cldet.core.features.FEATURE_NAMES`), each track weighted by its detections and the two
-  classes balanced; the refinement uses its probability in place of the hand-set track factors;
+  classes balanced; the refinement re-weighs the hand-set track factors by its probability
+  (``cldet.core.selection.LEARNED_FLOOR``);
 - the **drone-type classifier** (when the logs carry ``/class`` with two classes or more): the
-  same features of the drone's tracks, each labelled with its sequence's class, voted over the
-  chosen chain's tracks at annotation time.
+  shape features (:data:`cldet.core.features.TYPE_FEATURES`) of the drone tracks' prefixes,
+  each labelled with its sequence's class, voted over the chosen chain's tracks at annotation
+  time.
 
 A leave-one-sequence-out cross-validation (every log held out once, models fitted on the others)
 reports the type accuracy per row and the confusion matrix, and the refined position error with
@@ -28,7 +30,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
@@ -91,6 +93,10 @@ _TYPE_TREE_PARAMS: Final[dict[str, Any]] = {
 }  # a handful of sequences per class: small, regularised trees
 
 
+def _no_features() -> NDArray[np.float64]:
+    return np.zeros((0, len(FEATURE_NAMES)))
+
+
 class TrainError(CldetError):
     """The training logs cannot give a model (no truth, too few detections, ...)."""
 
@@ -104,12 +110,16 @@ class SequenceSample:
     truth_ns: NDArray[np.int64]  # (G,)
     truth_xyz: NDArray[np.float64]  # (G,3)
     class_id: int | None  # the sequence's drone type (None: no /class)
-    features: NDArray[np.float64]  # (T,F) per candidate track of two detections or more
-    hits: NDArray[np.float64]  # (T,) its detections
-    labels: NDArray[np.int8]  # (T,) 1 the drone, 0 clutter, -1 left out
-    pair_ns: NDArray[np.int64]  # (P,) stamps of the drone tracks' cluster detections
-    pair_xyz: NDArray[np.float64]  # (P,3) their centroids
-    type_features: NDArray[np.float64]  # (Q,F) the drone tracks' prefixes (what typing sees)
+    # (T,F) per candidate track of two detections or more
+    features: NDArray[np.float64] = field(default_factory=lambda: _no_features())
+    hits: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))  # (T,) detections
+    # (T,) 1 the drone, 0 clutter, -1 left out
+    labels: NDArray[np.int8] = field(default_factory=lambda: np.zeros(0, dtype=np.int8))
+    # (P,) stamps of the drone tracks' cluster detections, (P,3) their centroids
+    pair_ns: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    pair_xyz: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    # (Q,F) the drone tracks' prefixes (what typing sees)
+    type_features: NDArray[np.float64] = field(default_factory=lambda: _no_features())
 
     def truth_at(self, stamps_ns: NDArray[np.int64]) -> NDArray[np.float64]:
         """(Q,3) the truth at these stamps (linear inside its span, NaN outside)."""
@@ -168,23 +178,15 @@ def collect_sequence(
         progress.advance()
     cand = estimator.candidates()
     offset_ns = int(round(config.frames.scan_offset_s * NS_PER_S))
-    sample = SequenceSample(
-        log,
-        cand,
-        truth_ns,
-        truth_xyz,
-        class_id,
-        *_empty_tracks(),
-        *_empty_pairs(),
-        np.zeros((0, len(FEATURE_NAMES))),
-    )
+    sample = SequenceSample(log, cand, truth_ns, truth_xyz, class_id)
     feats, hits, labels, pair_ns, pair_xyz, prefixes = [], [], [], [], [], []
     tc = config.tracking
     for rec in cand.records:
         if len(rec.frames) < 2:
             continue
         det = track_detections(rec, cand.tables, tc)
-        feats.append(track_features(rec, det, cand.times_s[rec.frames]))
+        times = cand.times_s[rec.frames]
+        feats.append(track_features(rec, det, times))
         hits.append(float(len(rec.frames)))
         stamps = cand.stamps_ns[rec.frames]
         d = np.linalg.norm(rec.positions - sample.truth_at(stamps + offset_ns), axis=1)
@@ -199,7 +201,6 @@ def collect_sequence(
             pair_ns.append(stamps[keep])
             pair_xyz.append(rec.positions[keep])
             # annotate types a chain from its growing evidence: learn from the same prefixes
-            times = cand.times_s[rec.frames]
             for upto in (*range(_PREFIX_STEP, len(rec.frames), _PREFIX_STEP), len(rec.frames)):
                 prefixes.append(track_features(rec, det, times, upto))
     if feats:
@@ -212,14 +213,6 @@ def collect_sequence(
         sample.pair_ns = np.concatenate(pair_ns)
         sample.pair_xyz = np.concatenate(pair_xyz)
     return sample
-
-
-def _empty_tracks() -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int8]]:
-    return np.zeros((0, len(FEATURE_NAMES))), np.zeros(0), np.zeros(0, dtype=np.int8)
-
-
-def _empty_pairs() -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-    return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
 
 
 # ---------------------------------------------------------------------------- fitting

@@ -143,11 +143,9 @@ def _sample(
     from cldet.core.estimator import Candidates
 
     empty = Candidates([], [], np.zeros(0), np.zeros(0, dtype=np.int64))
-    f = np.zeros((0, len(FEATURE_NAMES)))
     return SequenceSample(
-        Path("synthetic.mcap"), empty, truth_ns, truth_xyz, None, f, np.zeros(0),
-        np.zeros(0, dtype=np.int8), pair_ns, pair_xyz, f,
-    )  # fmt: skip
+        Path("synthetic.mcap"), empty, truth_ns, truth_xyz, None, pair_ns=pair_ns, pair_xyz=pair_xyz
+    )
 
 
 def test_type_classifier_votes_over_tracks_and_maps_class_ids() -> None:

@@ -47,8 +47,8 @@ def train(
       the centroid bias (along the ray and in z: what `cldet calibrate` fits);
 
     - a drone-vs-clutter scorer (gradient-boosted trees over each track's height above the
-      ground, size, cross-section, speed, jitter, duration, sensors, ...) that replaces the
-      hand-set track factors when choosing the drone's tracks;
+      ground, size, cross-section, speed, jitter, duration, sensors, ...) that re-weighs the
+      hand-set track factors (by 0.3 + 0.7 p) when choosing the drone's tracks;
 
     - a drone-type classifier (when the logs carry /class with two classes or more), voted over
       the chosen tracks; `annotate --model` writes it on /cldet/class and `export` fills the

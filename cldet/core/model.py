@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cldet.config import BiasConfig, CldetConfig
-from cldet.core.features import FEATURE_NAMES, TYPE_COLUMNS
+from cldet.core.features import TYPE_COLUMNS
 
 __all__ = ["MODEL_FORMAT", "LearnedModel", "one_thread"]
 
@@ -40,7 +40,6 @@ class LearnedModel:
     typer: Any = None  # classes: indices into class_ids
     class_ids: list[int] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)  # trained on what, cross-validation
-    feature_names: tuple[str, ...] = FEATURE_NAMES
 
     def configure(self, config: CldetConfig) -> CldetConfig:
         """``config`` with the model's scan-time offset and centroid bias."""
