@@ -283,6 +283,7 @@ class TrackEstimator:
             self._times = np.concatenate([self._times, np.zeros(len(self._times))])
         self._times[index] = t_s
         owner = self._tracker.step(index, t_s, table, pts)
+        self._forget_ended()
         keep = self._account(index, t_s, table, owner, labels, fg_idx, pts)
         bg.update(frame.stamp_ns, pts if keep is None else pts[keep])
         estimate = self._decide(index, frame.stamp_ns, owner)
@@ -294,6 +295,17 @@ class TrackEstimator:
             clusters=clusters,
             estimate=estimate,
         )
+
+    def _forget_ended(self) -> None:
+        """Drop the causal evidence of tracks the tracker has ended (their ids never return).
+
+        Most tracks are clutter seen once: without this the evidence would grow with the
+        sequence. Swept when it holds twice the active tracks, so the cost stays per frame.
+        """
+        active = self._tracker.active_ids()
+        if len(self._evidence) > 2 * len(active) + 64:
+            alive = set(active.tolist())
+            self._evidence = {k: v for k, v in self._evidence.items() if k in alive}
 
     def _heights(self, clusters: tuple[Cluster, ...]) -> NDArray[np.float64]:
         """(K,) each cluster's lowest point above the local ground, 0 where it may continue."""
@@ -510,10 +522,9 @@ class TrackEstimator:
         if self._candidates is None or len(self._candidates.tables) != n:
             t_s = self._times[:n].copy()  # observation times (stamp + scan offset)
             records = self._tracker.records()
-            first_id = records[-1].track_id + 1 if records else 0
             if n:
                 records += find_lines(
-                    self._tables, t_s, self.config.tracking, first_id, self._offset_s
+                    self._tables, t_s, self.config.tracking, self._tracker.next_id, self._offset_s
                 )
             stamps = np.asarray(self._stamps, dtype=np.int64)
             self._candidates = Candidates(records, list(self._tables), t_s, stamps)

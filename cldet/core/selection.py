@@ -58,7 +58,12 @@ from numpy.typing import NDArray
 
 from cldet.config import TrackingConfig
 from cldet.core.features import TrackDetections, track_detections, track_features
-from cldet.core.tracking import ClusterTable, TrackRecord, constant_velocity_fit
+from cldet.core.tracking import (
+    MIN_TRACK_HITS,
+    ClusterTable,
+    TrackRecord,
+    constant_velocity_fit,
+)
 
 __all__ = [
     "ScoredTrack",
@@ -169,7 +174,7 @@ def score_tracks(
     """
     kept: list[tuple[TrackRecord, TrackDetections, NDArray[np.float64]]] = []
     for rec in records:
-        if len(rec.frames) < 2:
+        if len(rec.frames) < MIN_TRACK_HITS:
             continue
         det = track_detections(rec, tables, cfg)
         per_det = detection_weights(det.extent, det.height, rec.raw, rec.nis, det.cross, cfg)

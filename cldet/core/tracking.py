@@ -38,12 +38,15 @@ from cldet.types import Cluster
 
 __all__ = [
     "ActiveTracks",
+    "MIN_TRACK_HITS",
     "CandidateTracker",
     "ClusterTable",
     "TrackRecord",
     "constant_velocity_fit",
     "cross_section",
 ]
+
+MIN_TRACK_HITS = 2  # detections a candidate track needs to be scored (one is no evidence)
 
 
 @dataclass(frozen=True)
@@ -200,7 +203,9 @@ class CandidateTracker:
         self._last_t = np.zeros(0)  # last update time, s
         self._raw_ok: set[int] = set()  # ids of the tracks the raw gate may continue
         self._ids = np.zeros(0, dtype=np.int64)
-        self._hits: dict[int, _Hits] = {}
+        self._hits: dict[int, _Hits] = {}  # the active tracks'
+        # ended tracks of two detections or more, compacted (most tracks are clutter seen once)
+        self._ended: list[TrackRecord] = []
         self._t: float | None = None
         self._next_id = 0
 
@@ -228,7 +233,10 @@ class CandidateTracker:
             self._P = F @ self._P @ F.T + Q
             keep = t_s - self._last_t <= cfg.max_miss_s
             if not keep.all():
-                self._raw_ok.difference_update(self._ids[~keep].tolist())
+                ended = self._ids[~keep].tolist()
+                self._raw_ok.difference_update(ended)
+                for tid in ended:
+                    self._end(tid)
                 self._x, self._P = self._x[keep], self._P[keep]
                 self._last_t, self._ids = self._last_t[keep], self._ids[keep]
         self._t = t_s
@@ -380,6 +388,12 @@ class CandidateTracker:
         else:
             self._raw_ok.discard(track_id)
 
+    def active_ids(self) -> NDArray[np.int64]:
+        """(T,) the active tracks' ids at the last ``step`` (read-only)."""
+        ids = self._ids.view()
+        ids.flags.writeable = False
+        return ids
+
     def active(self) -> ActiveTracks:
         """The active tracks' filtered states at the last ``step``."""
         return ActiveTracks(
@@ -406,13 +420,24 @@ class CandidateTracker:
         """Points in a track's latest detection."""
         return self._hits[track_id].n_points[-1]
 
-    def record(self, track_id: int) -> TrackRecord:
-        """One candidate track's detections so far."""
-        return _to_record(track_id, self._hits[track_id])
+    @property
+    def next_id(self) -> int:
+        """The id the next new track gets (ids are never reused)."""
+        return self._next_id
+
+    def _end(self, track_id: int) -> None:
+        """Forget an ended track's running state; keep its detections if it is a track at all."""
+        hits = self._hits.pop(track_id)
+        if len(hits.frames) >= MIN_TRACK_HITS:
+            self._ended.append(_to_record(track_id, hits))
 
     def records(self) -> list[TrackRecord]:
-        """Every candidate track so far (ended or active), by track id."""
-        return [_to_record(tid, h) for tid, h in sorted(self._hits.items())]
+        """Every candidate track so far (ended or active) of at least ``MIN_TRACK_HITS``
+        detections, by track id. A lone detection is no track: nothing scores it."""
+        live = [
+            _to_record(tid, h) for tid, h in self._hits.items() if len(h.frames) >= MIN_TRACK_HITS
+        ]
+        return sorted(self._ended + live, key=lambda r: r.track_id)
 
 
 def _to_record(tid: int, h: _Hits) -> TrackRecord:
