@@ -61,6 +61,7 @@ _END_FIT = 8  # inliers nearest an end that predict the line beyond it
 # that the cap scales with the sequence's length (and at least _MIN_SEED_CAP)
 _SEEDS_PER_FRAME = 2_500
 _MIN_SEED_CAP = 200_000
+_COUNT_CHUNK = 20_000  # seeds counted at once (bounds the memory of long sequences)
 _Speed = TypeVar("_Speed", float, NDArray[np.float64])
 _TIME_SCALE_M_PER_S = 1e4  # space-time lookups: 0.01 s apart is 100 m apart
 
@@ -163,39 +164,54 @@ def _count(
     half_scan_s: float,
 ) -> NDArray[np.int64]:
     """Per seed: distinct places along its line (within the window around it) where a frame
-    has a candidate on the line."""
+    has a candidate on the line.
+
+    Seeds are counted in chunks of ``_COUNT_CHUNK`` in start-time order, so that memory stays
+    bounded however long the sequence.
+    """
     a, b = seeds[:, 0], seeds[:, 1]
     ta, tb = pool.t[a], pool.t[b]
     v = (pool.pos[b] - pool.pos[a]) / (tb - ta)[:, None]
     speed = np.linalg.norm(v, axis=1)
     tol = _tolerance(speed, cfg, half_scan_s)
     place = 2.0 * tol  # along-line length of one place
-    found_seed: list[NDArray[np.int64]] = []
-    found_place: list[NDArray[np.int64]] = []
     w = cfg.line_seed_s  # a seed pair predicts well only near itself
     by_start = np.argsort(ta, kind="stable")
-    ta_sorted = ta[by_start]
-    for f in pool.trees:
-        tf = float(times_s[f])
-        # tb <= ta + seed_s, so a seed whose window holds tf starts within
-        # [tf - w - seed_s, tf + w]
-        lo, hi = np.searchsorted(ta_sorted, [tf - w - cfg.line_seed_s, tf + w], side="left")
-        near = by_start[lo:hi]
-        sel = near[(tf >= ta[near] - w) & (tf <= tb[near] + w)]
-        if not len(sel):
+    counts = np.zeros(len(seeds), dtype=np.int64)
+    frames = np.array(sorted(pool.trees), dtype=np.int64)
+    frame_t = times_s[frames]
+    for lo in range(0, len(seeds), _COUNT_CHUNK):
+        chunk = by_start[lo : lo + _COUNT_CHUNK]
+        ta_chunk = ta[chunk]  # sorted
+        first, last = np.searchsorted(
+            frame_t, [ta_chunk[0] - w, float(tb[chunk].max()) + w], side="left"
+        )
+        found_seed: list[NDArray[np.int64]] = []
+        found_place: list[NDArray[np.int64]] = []
+        span = slice(first, last + 1)
+        for f, tf in zip(frames[span].tolist(), frame_t[span].tolist(), strict=True):
+            # tb <= ta + seed_s, so a seed whose window holds tf starts within
+            # [tf - w - seed_s, tf + w]
+            i0, i1 = np.searchsorted(ta_chunk, [tf - w - cfg.line_seed_s, tf + w], side="left")
+            near = chunk[i0:i1]
+            sel = near[(tf >= ta[near] - w) & (tf <= tb[near] + w)]
+            if not len(sel):
+                continue
+            dt = tf - ta[sel]
+            pred = pool.pos[a[sel]] + v[sel] * dt[:, None]
+            d, _ = pool.nearest(np.full(len(sel), f), pred, float(tol[sel].max()))
+            on = d <= tol[sel]
+            found_seed.append(sel[on])
+            found_place.append(np.floor(dt[on] * speed[sel[on]] / place[sel[on]]).astype(np.int64))
+        if not found_seed:
             continue
-        dt = tf - ta[sel]
-        pred = pool.pos[a[sel]] + v[sel] * dt[:, None]
-        d, _ = pool.nearest(np.full(len(sel), f), pred, float(tol[sel].max()))
-        on = d <= tol[sel]
-        found_seed.append(sel[on])
-        found_place.append(np.floor(dt[on] * speed[sel[on]] / place[sel[on]]).astype(np.int64))
-    if not found_seed:
-        return np.zeros(len(seeds), dtype=np.int64)
-    seed_ids, places = np.concatenate(found_seed), np.concatenate(found_place)
-    # distinct places per seed: a static clump on the line counts once
-    key = np.unique(np.stack([seed_ids, places], axis=1), axis=0)
-    return np.bincount(key[:, 0], minlength=len(seeds))
+        seed_ids, places = np.concatenate(found_seed), np.concatenate(found_place)
+        # distinct places per seed: a static clump on the line counts once
+        places -= places.min()
+        width = int(places.max()) + 1
+        key = np.unique(seed_ids * width + places)  # one int64 per (seed, place)
+        counts += np.bincount(key // width, minlength=len(seeds))
+    return counts
 
 
 def _tolerance(speed: _Speed, cfg: TrackingConfig, half_scan_s: float) -> _Speed:
@@ -217,9 +233,10 @@ def _grow(
     while True:
         idx = np.array(sorted(members.values(), key=lambda i: pool.frame[i]))
         t0, t1 = times_s[pool.frame[idx[0]]], times_s[pool.frame[idx[-1]]]
-        window = np.flatnonzero(
-            (times_s >= t0 - cfg.line_window_s) & (times_s <= t1 + cfg.line_window_s)
-        )
+        # the frames within line_window_s of the inliers (times_s is increasing)
+        lo = int(np.searchsorted(times_s, t0 - cfg.line_window_s, side="left"))
+        hi = int(np.searchsorted(times_s, t1 + cfg.line_window_s, side="right"))
+        window = np.arange(lo, hi)
         fits = (
             constant_velocity_fit(
                 pool.t[idx[:_END_FIT]], pool.pos[idx[:_END_FIT]]
