@@ -8,8 +8,9 @@ The flow for one log (times are integer ns throughout):
 4. the log is rewritten with the ``/cldet/*`` result channels (every source message copied byte
    for byte, earlier results replaced), atomically, and the ``.rrd`` renamed into place.
 
-Nothing holds more than one frame's raw points; what is kept per frame for the results is the
-small foreground.
+Nothing holds more than one frame's raw points; what the results need of each frame (its
+foreground and clusters) waits in a temporary file (:class:`cldet.io.spool.Spool`), and the
+estimator keeps per frame only what ``refine`` needs, so memory grows slowly with the length.
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ from cldet.io.sources import (
     iter_log_positions,
     select_topics,
 )
+from cldet.io.spool import Spool
 from cldet.io.transforms import log_tree
 from cldet.live import LiveOutput
 from cldet.progress import NullProgress, Progress
@@ -218,10 +220,12 @@ def annotate_log(
     )
     if foxglove_view is not None:
         view = TeeView(view, foxglove_view)
+    # every frame's foreground and clusters, on disk until the results are written: memory
+    # does not grow with the sequence's length
+    detections: Spool[FrameDetections] = Spool()
     try:
         estimator = make_estimator(config, model)
         progress.start(n_frames, f"{sequence}: tracking")
-        detections: list[FrameDetections] = []
         lidar_frame: list[str] = []
         try:
             for frame in read_frames(log, sensors, config.frames, lidar_frame):
@@ -275,6 +279,8 @@ def annotate_log(
     except BaseException:
         view.abort()
         raise
+    finally:
+        detections.close()
     sources = {s.name.lower(): 0 for s in Source}
     for estimate in result.estimates:
         sources[estimate.source.name.lower()] += 1

@@ -83,9 +83,10 @@ def result_additions(
                     ),
                 )
             )
-    for det in detections:
+    for i, det in enumerate(detections):
+        # the writer reads its frame again when called: ``detections`` may live on disk
         chosen_id = result.chosen.get(det.stamp_ns)
-        additions.append((det.stamp_ns, _clusters_writer(det, chosen_id, frame_id)))
+        additions.append((det.stamp_ns, _frame_clusters_writer(detections, i, chosen_id, frame_id)))
     return additions
 
 
@@ -142,6 +143,15 @@ def causal_additions(det: FrameDetections, frame_id: str) -> list[tuple[int, Add
 def _causal_writer(est: Estimate) -> Addition:
     def write(writer: LogWriter) -> None:
         writer.write_estimate(topics.CAUSAL, est.stamp_ns, est)
+
+    return write
+
+
+def _frame_clusters_writer(
+    detections: Sequence[FrameDetections], index: int, chosen_id: int | None, frame_id: str
+) -> Addition:
+    def write(writer: LogWriter) -> None:
+        _clusters_writer(detections[index], chosen_id, frame_id)(writer)
 
     return write
 

@@ -433,19 +433,16 @@ class RerunView:
                 rr.LineStrips3D([positions], colors=[_TRACK_COLOUR], radii=[0.04]),
                 static=True,
             )
-        if not self._live:  # the boxes of every frame, but the drone's (it has its own)
-            for det in detections:
-                chosen_id = result.chosen.get(det.stamp_ns)
+        chosen: list[tuple[int, Cluster]] = []
+        for det in detections:  # one pass: ``detections`` may live on disk
+            chosen_id = result.chosen.get(det.stamp_ns)
+            if chosen_id is not None and 0 <= chosen_id < len(det.clusters):
+                chosen.append((det.stamp_ns, det.clusters[chosen_id]))
+            if not self._live:  # the boxes of every frame, but the drone's (it has its own)
                 self._add_boxes(
                     det.stamp_ns, [c for c in det.clusters if c.cluster_id != chosen_id]
                 )
-            self._flush()
-        by_stamp = {d.stamp_ns: d for d in detections}
-        chosen = [
-            (s, by_stamp[s].clusters[cid])
-            for s, cid in sorted(result.chosen.items())
-            if s in by_stamp and 0 <= cid < len(by_stamp[s].clusters)
-        ]
+        self._flush()
         if chosen:
             rec.send_columns(
                 "world/drone/chosen",

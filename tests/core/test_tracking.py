@@ -161,3 +161,25 @@ def test_lone_returns_near_the_sensor_lose_to_a_hovering_drone_by_cross_section(
         _, chain = _run(tables, cfg)
         assert chain
         assert all(tr.positions[0, 0] > 10 for tr, _, _ in chain) == drone_wins
+
+
+def test_records_keep_ended_tracks_and_drop_lone_detections() -> None:
+    """An object followed for a while and then gone is still a candidate at the end; a lone
+    return is no track (nothing scores one) and leaves nothing behind."""
+    cfg = TrackingConfig()
+    rng = np.random.default_rng(3)
+    tracker = CandidateTracker(cfg)
+    n = 200
+    for k in range(n):
+        items: list[tuple[np.ndarray, float, int]] = []
+        if k < 30:  # seen for 3 s, then gone for good (long past max_miss_s)
+            items.append((np.array([8.0 + 0.5 * k * 0.1, 2.0, 3.0]), 0.3, 10))
+        # speckle: one return somewhere new every frame
+        items.append((rng.uniform([-30, -30, 0], [30, 30, 10]), 0.0, 1))
+        tracker.step(k, k * 0.1, _table(items))
+    records = tracker.records()
+    assert all(len(r.frames) >= 2 for r in records)
+    ended = [r for r in records if r.frames[0] == 0]
+    assert len(ended) == 1 and len(ended[0].frames) == 30
+    ids = [r.track_id for r in records]
+    assert ids == sorted(ids) and tracker.next_id > max(ids)
