@@ -8,7 +8,8 @@ particular order; ``Outcome.index`` says which job it was). Two executors run it
   files); one worker, or one job, runs in this process. Workers raise on SIGTERM, stop when the
   process that started them dies, and are stopped (not waited for) on Ctrl-C or SIGTERM.
 - ``ray``: one Ray task per job (one CPU each), on a local Ray started for the run (``workers``
-  CPUs, no dashboard, worker logs not forwarded) or on a cluster joined at ``ray_address``.
+  CPUs, no dashboard, worker logs not forwarded) or on a cluster joined at ``ray_address`` (or
+  ``$RAY_ADDRESS``).
   Every node needs cldet installed and the files at the same paths (a shared file system): the
   tasks receive paths, not data. Ctrl-C or SIGTERM cancels the running tasks (they remove their
   temporary files) and a Ray started here is shut down. Needs ``pip install "cldet[ray]"``.
@@ -119,9 +120,9 @@ def iter_outcomes(
             ``local`` with one worker, or one job, runs in this process.
         executor: ``local`` (worker processes here) or ``ray`` (Ray tasks).
         ray_address: with ``ray``, the cluster to join (``auto``: the one ``ray start`` ran on
-            this machine; ``HOST:PORT``; ``ray://HOST:10001``). Default: start a local Ray for
-            the run, unless this process is connected to Ray already (its connection is used
-            and left open).
+            this machine; ``HOST:PORT``; ``ray://HOST:10001``). Default: ``$RAY_ADDRESS`` when
+            set (``ray job submit`` sets it), else a local Ray started for the run and shut down
+            after it; a process connected to Ray already keeps its connection (left open).
         progress: receives the units ``fn`` reports, while each job runs.
 
     Yields:
@@ -348,6 +349,7 @@ def _connect_ray(ray: Any, address: str | None, workers: int | None) -> bool:
     call connected it (and the caller shuts it down), False when it was connected already."""
     if ray.is_initialized():
         return False
+    address = address or os.environ.get("RAY_ADDRESS") or None  # as `ray job submit` sets it
     main = threading.current_thread() is threading.main_thread()
     sigterm = signal.getsignal(signal.SIGTERM) if main else None
     quiet = {"log_to_driver": False, "logging_level": logging.ERROR}
