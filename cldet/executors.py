@@ -39,7 +39,7 @@ from typing import Any, Generic, TypeVar
 
 from cldet.errors import CldetError, ExecutorError
 from cldet.progress import NullProgress, Progress
-from cldet.signals import init_worker, stop_workers
+from cldet.signals import Terminated, init_worker, sigterm_received, stop_workers
 
 __all__ = ["EXECUTORS", "RAY_INSTALL", "Outcome", "iter_outcomes", "ray_available"]
 
@@ -413,7 +413,7 @@ def _iter_ray(
                     done = _Done(error=_ray_failure(err), trace="")
                 ledger.settle(index, done.counted)
                 yield Outcome(index, done.result, done.error, done.trace)
-    except BaseException:
+    except BaseException as err:
         # Ctrl-C, SIGTERM, the caller leaving early: cancel the running tasks (KeyboardInterrupt
         # in them: they remove their temporary files) and give them a moment to do so
         for ref in in_flight:
@@ -422,6 +422,9 @@ def _iter_ray(
         if in_flight:
             with contextlib.suppress(Exception):
                 ray.wait(list(in_flight), num_returns=len(in_flight), timeout=_CANCEL_GRACE_S)
+        if type(err) is KeyboardInterrupt and sigterm_received():
+            # a blocking Ray call turned our Terminated into a plain KeyboardInterrupt
+            raise Terminated("terminated by signal SIGTERM") from err
         raise
     finally:
         if queue is not None:

@@ -172,3 +172,42 @@ def test_cli_on_ray(logs: Callable[[str], list[Path]], dataset: Path, tmp_path: 
     )
     assert result.exit_code == 0, result.output
     assert "converted 1 sequence(s)" in result.output
+
+
+def test_sigterm_mid_convert_on_ray_leaves_nothing_behind(tmp_path: Path) -> None:
+    """As tests/test_signals.py for the local executor: exit code 143, one line, no temporary
+    file, the inputs untouched, no process of the run left (its own local Ray included)."""
+    import subprocess
+    import sys
+    import time
+
+    from tests.test_signals import REPO, SLOW_LOAD, build, digest, processes_left, temporaries
+
+    data, out, hook = tmp_path / "data", tmp_path / "logs", tmp_path / "hook"
+    build(data)
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(SLOW_LOAD)
+    before = digest(data)
+    tag = f"{os.getpid()}ray"
+    env = {**os.environ, "PYTHONPATH": f"{hook}:{REPO}", "CLDET_SIGNAL_TEST": tag}
+    env.pop("RAY_ADDRESS", None)
+    command = [sys.executable, "-m", "cldet", "convert", str(data), "-o", str(out)]
+    run = subprocess.Popen(
+        [*command, "--workers", "2", "--executor", "ray"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    deadline = time.monotonic() + 120  # Ray starts in ~10 s on a busy 2-core machine
+    while not (out.is_dir() and temporaries(out)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert temporaries(out), "the run never started writing"
+    time.sleep(0.5)
+    run.send_signal(signal.SIGTERM)
+    run.wait(timeout=60)
+    assert run.stderr is not None
+    err = run.stderr.read()
+    assert run.returncode == 143, err
+    assert err.strip() == b"terminated (SIGTERM); temporary files removed"
+    assert temporaries(out) == [] and digest(data) == before
+    assert processes_left(tag, within_s=15) == []
