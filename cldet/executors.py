@@ -47,6 +47,7 @@ EXECUTORS: tuple[str, ...] = ("local", "ray")
 RAY_INSTALL = 'pip install "cldet[ray]"'
 _POLL_S = 0.2  # how often progress is forwarded while jobs run
 _CANCEL_GRACE_S = 5.0  # cancelled Ray tasks get this long to remove their temporary files
+_CONNECT_TIMEOUT_S = 5.0  # a Ray address that does not answer within this is an error
 
 J = TypeVar("J")
 R = TypeVar("R")
@@ -344,6 +345,23 @@ def _import_ray() -> Any:
     return ray
 
 
+def _check_reachable(address: str) -> None:
+    """Fail at once on a ``HOST:PORT`` (or ``ray://HOST:PORT``) nobody listens at, instead of
+    letting Ray retry for minutes."""
+    import socket
+
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if not host or not port.isdigit():
+        return  # "auto", or a form Ray checks itself
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=_CONNECT_TIMEOUT_S).close()
+    except OSError as err:
+        raise ExecutorError(
+            f"cannot reach Ray at {address}: {err.strerror or err}; is the cluster running "
+            "(`ray status` on its head node)?"
+        ) from err
+
+
 def _connect_ray(ray: Any, address: str | None, workers: int | None) -> bool:
     """Connect this process to Ray (starting a local one without ``address``); True when this
     call connected it (and the caller shuts it down), False when it was connected already."""
@@ -355,6 +373,7 @@ def _connect_ray(ray: Any, address: str | None, workers: int | None) -> bool:
     quiet = {"log_to_driver": False, "logging_level": logging.ERROR}
     try:
         if address:
+            _check_reachable(address)
             ray.init(address=address, **quiet)
         else:  # "local": a new Ray for this run, even where RAY_ADDRESS is set
             ray.init(address="local", num_cpus=workers, include_dashboard=False, **quiet)

@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cldet.errors import ExecutorError
-from cldet.executors import Outcome, _ProgressLedger, iter_outcomes
+from cldet.executors import Outcome, _check_reachable, _ProgressLedger, iter_outcomes
 from tests.executor_jobs import pid, square
 
 
@@ -82,6 +82,18 @@ def test_bad_arguments_are_named() -> None:
         iter_outcomes(square, [1], ray_address="auto")
     with pytest.raises(ExecutorError, match=r"workers must be at least 1, not 0"):
         iter_outcomes(square, [1], workers=0)
+
+
+def test_a_ray_address_nobody_answers_at_fails_at_once() -> None:
+    import socket
+
+    with socket.socket() as sock:  # a port that was free a moment ago: nobody listens there
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    for address in (f"127.0.0.1:{port}", f"ray://127.0.0.1:{port}"):
+        with pytest.raises(ExecutorError, match=rf"cannot reach Ray at {address}: .*ray status"):
+            _check_reachable(address)
+    _check_reachable("auto")  # left to Ray
 
 
 @pytest.fixture
