@@ -15,7 +15,8 @@ particular order; ``Outcome.index`` says which job it was). Two executors run it
   temporary files) and a Ray started here is shut down. Needs ``pip install "cldet[ray]"``.
 
 Both executors report the same outcomes for the same jobs: an exception raised by ``fn`` is that
-job's failure (``Outcome.error``), the other jobs go on. Progress units ``fn`` reports on the
+job's failure (``Outcome.error``), the other jobs go on; a caller that treats some errors as a
+crash raises them (``Outcome.raise_error``), which stops the jobs still running. Progress units ``fn`` reports on the
 ``progress`` it is given reach the caller's progress while the job runs, each exactly once.
 """
 
@@ -35,7 +36,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from queue import Empty
-from typing import Any, Generic, TypeVar
+from typing import Any, Generic, NoReturn, TypeVar
 
 from cldet.errors import CldetError, ExecutorError
 from cldet.progress import NullProgress, Progress
@@ -81,6 +82,23 @@ class Outcome(Generic[R]):
         where = _innermost_frame(self.trace)
         text = str(err).strip().splitlines()
         return f"unexpected {type(err).__name__}{where}: {text[-1] if text else ''}".rstrip(": ")
+
+    def raise_error(self) -> NoReturn:
+        """Raise the job's error here (a caller's way to treat it as a crash, not a failure);
+        from a worker process, with the worker's traceback as its cause."""
+        err = self.error
+        if err is None:
+            raise ValueError(f"job {self.index} did not fail")
+        if err.__traceback__ is None and err.__cause__ is None and self.trace:
+            err.__cause__ = _WorkerTraceback(self.trace)
+        raise err
+
+
+class _WorkerTraceback(Exception):
+    """The traceback of an error raised in a worker process, shown as its cause."""
+
+    def __str__(self) -> str:
+        return f'\n"""\n{self.args[0]}"""'
 
 
 def _innermost_frame(trace: str) -> str:

@@ -479,12 +479,12 @@ def annotate_logs(
 
     Returns:
         (reports of the logs done, in the order given; (log, error message) of those that
-        failed, in the order given). A log that fails with an error that is not a
-        :class:`CldetError` (a bug) is reported too, with the error's type and where it was
-        raised.
+        failed with a :class:`CldetError`, in the order given).
 
     Raises:
         ExecutorError: an unknown executor, Ray missing or unreachable, a worker process died.
+        Any other error of one log (an ``OSError``, a bug) is raised here, with the worker's
+        traceback as its cause, and the logs still running are stopped.
     """
     if outputs is not None and len(outputs) != len(logs):
         raise CldetError(f"{len(outputs)} output paths for {len(logs)} logs")
@@ -513,8 +513,10 @@ def annotate_logs(
         for outcome in outcomes:
             if outcome.result is not None:
                 done[outcome.index] = outcome.result
-            else:
-                failed[outcome.index] = outcome.message()
+            elif isinstance(outcome.error, CldetError):
+                failed[outcome.index] = str(outcome.error)
+            else:  # a crash (a bug, a full disk): raised here, the other logs are stopped
+                outcome.raise_error()
             if not per_frame:
                 progress.advance()
     failures = [(Path(logs[i]), failed[i]) for i in sorted(failed)]

@@ -308,8 +308,9 @@ def convert_dataset(
     )
     with closing(outcomes):
         for outcome in outcomes:
-            job = jobs[outcome.index]
-            tally.add(outcome.result or _Outcome(job, error=outcome.message()))
+            if outcome.result is None:  # not a DatasetError or OSError: a crash, as in one process
+                outcome.raise_error()
+            tally.add(outcome.result)
 
     return ConvertReport(
         converted=tuple(sorted(tally.converted)),

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import sys
+import traceback
 from collections.abc import Callable
 from pathlib import Path
 
@@ -38,6 +39,9 @@ def check_square_outcomes(outcomes: list[Outcome[int]], progress: CountingProgre
     assert unexpected.startswith("unexpected ZeroDivisionError at ")
     assert "executor_jobs.py:" in unexpected and unexpected.endswith(": division by zero")
     assert "ZeroDivisionError" in by_index[5].trace  # the worker's traceback, for a bug report
+    with pytest.raises(ZeroDivisionError) as raised:  # a caller that calls it a crash
+        by_index[5].raise_error()
+    assert "executor_jobs.py" in "".join(traceback.format_exception(raised.value))
     assert progress.done == sum(range(7))  # every unit the jobs reported, exactly once
 
 
