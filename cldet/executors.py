@@ -9,15 +9,15 @@ particular order; ``Outcome.index`` says which job it was). Two executors run it
   process that started them dies, and are stopped (not waited for) on Ctrl-C or SIGTERM.
 - ``ray``: one Ray task per job (one CPU each), on a local Ray started for the run (``workers``
   CPUs, no dashboard, worker logs not forwarded) or on a cluster joined at ``ray_address`` (or
-  ``$RAY_ADDRESS``).
-  Every node needs cldet installed and the files at the same paths (a shared file system): the
-  tasks receive paths, not data. Ctrl-C or SIGTERM cancels the running tasks (they remove their
-  temporary files) and a Ray started here is shut down. Needs ``pip install "cldet[ray]"``.
+  ``$RAY_ADDRESS``). Every node needs cldet installed and the files at the same paths (a shared
+  file system): the tasks receive paths, not data. Ctrl-C or SIGTERM cancels the running tasks
+  (they remove their temporary files) and a Ray started here is shut down. Needs
+  ``pip install "cldet[ray]"``.
 
 Both executors report the same outcomes for the same jobs: an exception raised by ``fn`` is that
 job's failure (``Outcome.error``), the other jobs go on; a caller that treats some errors as a
-crash raises them (``Outcome.raise_error``), which stops the jobs still running. Progress units ``fn`` reports on the
-``progress`` it is given reach the caller's progress while the job runs, each exactly once.
+crash raises them (``Outcome.raise_error``), which stops the jobs still running. The progress
+units ``fn`` reports reach the caller's progress while the job runs, each exactly once.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from cldet.errors import CldetError, ExecutorError
 from cldet.progress import NullProgress, Progress
 from cldet.signals import Terminated, init_worker, sigterm_received, stop_workers
 
-__all__ = ["EXECUTORS", "RAY_INSTALL", "Outcome", "iter_outcomes", "ray_available"]
+__all__ = ["EXECUTORS", "RAY_INSTALL", "Outcome", "iter_outcomes"]
 
 EXECUTORS: tuple[str, ...] = ("local", "ray")
 RAY_INSTALL = 'pip install "cldet[ray]"'
@@ -109,13 +109,6 @@ def _innermost_frame(trace: str) -> str:
     parts = frames[-1].split('"')
     line = frames[-1].split(", line ")[-1].split(",")[0]
     return f" at {parts[1]}:{line}" if len(parts) > 2 else ""
-
-
-def ray_available() -> bool:
-    """Whether Ray can be imported here."""
-    import importlib.util
-
-    return importlib.util.find_spec("ray") is not None
 
 
 def iter_outcomes(
