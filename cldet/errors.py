@@ -50,3 +50,8 @@ class OutputError(CldetError):
 
 class OutputExistsError(CldetError):
     """An output already exists and overwriting was not requested."""
+
+
+class ExecutorError(CldetError):
+    """Jobs could not be run in parallel: an unknown executor, Ray missing or unreachable, a
+    worker process that died."""

@@ -17,11 +17,9 @@ from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing.context
-import os
 import time
 from collections.abc import Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,6 +36,7 @@ from cldet.core.methods import make_estimator
 from cldet.core.model import LearnedModel
 from cldet.core.trajectory import rms, trajectory_errors
 from cldet.errors import CldetError, FrameOrderError
+from cldet.executors import iter_outcomes
 from cldet.io import topics
 from cldet.io.files import check_output, lock_file
 from cldet.io.mcap_append import is_replaced_channel
@@ -56,7 +55,6 @@ from cldet.io.transforms import log_tree
 from cldet.live import LiveOutput
 from cldet.progress import NullProgress, Progress
 from cldet.result_channels import result_additions
-from cldet.signals import init_worker, stop_workers
 from cldet.types import Cloud, Estimate, LidarFrame, Source
 from cldet.view import NullView, RerunView, TeeView, View
 
@@ -415,102 +413,117 @@ def annotate_log_locked(
         )
 
 
+@dataclass(frozen=True)
+class _AnnotateJob:
+    """One log of :func:`annotate_logs`, as a worker receives it."""
+
+    log: Path
+    output: Path
+    config: CldetConfig | None
+    write_rrd: bool
+    force: bool
+    lidar: str | None
+    avia: str | None
+    truth: str | None
+    model: LearnedModel | None
+    per_frame: bool  # report progress per frame (one log at a time, in this process)
+
+
+def _annotate_job(job: _AnnotateJob, progress: Progress) -> AnnotateReport:
+    """:func:`annotate_log_locked` on one job (runs in a worker process or a Ray task)."""
+    return annotate_log_locked(
+        job.log,
+        config=job.config,
+        output=job.output,
+        write_rrd=job.write_rrd,
+        force=job.force,
+        progress=progress if job.per_frame else None,
+        lidar=job.lidar,
+        avia=job.avia,
+        truth=job.truth,
+        model=job.model,
+    )
+
+
 def annotate_logs(
     logs: Sequence[Path],
     *,
     config: CldetConfig | None = None,
     outputs: Sequence[Path] | None = None,
     write_rrd: bool = True,
-    workers: int = 1,
+    workers: int | None = 1,
     force: bool = False,
     progress: Progress | None = None,
     lidar: str | None = None,
     avia: str | None = None,
     truth: str | None = None,
     model: LearnedModel | None = None,
+    executor: str = "local",
+    ray_address: str | None = None,
 ) -> tuple[list[AnnotateReport], list[tuple[Path, str]]]:
-    """Annotate several logs, in parallel processes when ``workers > 1``.
+    """Annotate several logs, in parallel when ``workers > 1`` or on Ray.
 
     One failing log is reported and the others still run. Each log is locked while it is
-    annotated (:func:`annotate_log_locked`). On Ctrl-C or SIGTERM the workers are stopped and
-    remove their temporary files; a worker stops by itself when this process dies.
+    annotated (:func:`annotate_log_locked`). On Ctrl-C or SIGTERM the workers (or Ray tasks) are
+    stopped and remove their temporary files; a local worker stops by itself when this process
+    dies. Both executors write the same outputs, byte for byte.
 
     Args:
         logs: the MCAP logs.
         config: the estimator configuration (defaults when None).
         outputs: one output path per log (default: each log rewritten in place).
         write_rrd: write a ``.rrd`` beside each output.
-        workers: processes; 1 runs in this process (with per-frame progress).
+        workers: logs annotated at once (None: every CPU, here or of the Ray cluster); 1 with
+            the ``local`` executor runs in this process (with per-frame progress).
         force: rewrite read-only logs (their mode is kept).
-        progress: one unit per frame (single worker) or per log (several).
+        progress: one unit per frame (one log at a time, in this process) or per log.
         lidar, avia, truth: the topics to read in every log (as :func:`annotate_log`).
         model: a model from ``cldet train`` (as :func:`annotate_log`).
+        executor: ``local`` (worker processes here) or ``ray`` (a Ray task per log; see
+            :mod:`cldet.executors`).
+        ray_address: with ``ray``, the cluster to join (default: a local Ray for the run).
 
     Returns:
-        (reports of the logs done, in the order given; (log, error message) of those that failed).
+        (reports of the logs done, in the order given; (log, error message) of those that
+        failed with a :class:`CldetError`, in the order given).
+
+    Raises:
+        ExecutorError: an unknown executor, Ray missing or unreachable, a worker process died.
+        Any other error of one log (an ``OSError``, a bug) is raised here, with the worker's
+        traceback as its cause, and the logs still running are stopped.
     """
     if outputs is not None and len(outputs) != len(logs):
         raise CldetError(f"{len(outputs)} output paths for {len(logs)} logs")
     targets = list(outputs) if outputs is not None else [Path(log) for log in logs]
     progress = progress or NullProgress()
+    per_frame = executor == "local" and (workers is not None and workers <= 1 or len(logs) == 1)
+    jobs = [
+        _AnnotateJob(
+            Path(log), Path(target), config, write_rrd, force, lidar, avia, truth, model, per_frame
+        )
+        for log, target in zip(logs, targets, strict=True)
+    ]
     done: dict[int, AnnotateReport] = {}
-    failures: list[tuple[Path, str]] = []
-    if workers <= 1 or len(logs) == 1:
-        for i, log in enumerate(logs):
-            try:
-                done[i] = annotate_log_locked(
-                    log,
-                    config=config,
-                    output=targets[i],
-                    write_rrd=write_rrd,
-                    force=force,
-                    progress=progress,
-                    lidar=lidar,
-                    avia=avia,
-                    truth=truth,
-                    model=model,
-                )
-            except CldetError as err:
-                failures.append((Path(log), str(err)))
-        return [done[i] for i in sorted(done)], failures
-    progress.start(len(logs), "annotating")
-    with ProcessPoolExecutor(
-        max_workers=workers,
-        mp_context=_mp_context(),
-        initializer=init_worker,
-        initargs=(os.getpid(),),
-    ) as pool:
-        futures = {
-            pool.submit(
-                annotate_log_locked,
-                log,
-                config=config,
-                output=targets[i],
-                write_rrd=write_rrd,
-                force=force,
-                lidar=lidar,
-                avia=avia,
-                truth=truth,
-                model=model,
-            ): i
-            for i, log in enumerate(logs)
-        }
-        try:
-            for future in as_completed(futures):
-                i = futures[future]
-                try:
-                    done[i] = future.result()
-                except CldetError as err:
-                    failures.append((Path(logs[i]), str(err)))
+    failed: dict[int, str] = {}
+    if not per_frame:
+        progress.start(len(logs), "annotating")
+    outcomes = iter_outcomes(
+        _annotate_job,
+        jobs,
+        workers=workers,
+        executor=executor,
+        ray_address=ray_address,
+        progress=progress,
+    )
+    with closing(outcomes):
+        for outcome in outcomes:
+            if outcome.result is not None:
+                done[outcome.index] = outcome.result
+            elif isinstance(outcome.error, CldetError):
+                failed[outcome.index] = str(outcome.error)
+            else:  # a crash (a bug, a full disk): raised here, the other logs are stopped
+                outcome.raise_error()
+            if not per_frame:
                 progress.advance()
-        except BaseException:  # Ctrl-C, SIGTERM: stop the workers instead of waiting for them
-            stop_workers(pool)
-            raise
+    failures = [(Path(logs[i]), failed[i]) for i in sorted(failed)]
     return [done[i] for i in sorted(done)], failures
-
-
-def _mp_context() -> multiprocessing.context.BaseContext:
-    """Fresh worker processes (forkserver): no inherited threads or open files."""
-    import multiprocessing
-
-    return multiprocessing.get_context("forkserver")

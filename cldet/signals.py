@@ -22,7 +22,14 @@ import time
 from types import FrameType
 from typing import Any
 
-__all__ = ["Terminated", "init_worker", "pid_alive", "raise_on_sigterm", "stop_workers"]
+__all__ = [
+    "Terminated",
+    "init_worker",
+    "pid_alive",
+    "raise_on_sigterm",
+    "sigterm_received",
+    "stop_workers",
+]
 
 _PR_SET_PDEATHSIG = 1
 _WATCH_PERIOD_S = 0.25
@@ -33,8 +40,22 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM was received; handled like Ctrl-C (temporary files removed), exit code 143."""
 
 
+_sigterm_received = False
+
+
 def _raise_terminated(signum: int, frame: FrameType | None) -> None:
+    global _sigterm_received
+    _sigterm_received = True
     raise Terminated(f"terminated by signal {signal.Signals(signum).name}")
+
+
+def sigterm_received() -> bool:
+    """Whether :func:`raise_on_sigterm`'s handler has run in this process.
+
+    For code that calls libraries which turn any ``KeyboardInterrupt`` into a plain one (Ray's
+    blocking calls do): a plain ``KeyboardInterrupt`` after SIGTERM was still SIGTERM.
+    """
+    return _sigterm_received
 
 
 def raise_on_sigterm() -> None:

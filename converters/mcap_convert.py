@@ -7,32 +7,28 @@ as PNG plus a camera calibration, the static frame tree on ``/tf`` (see
 time, publish time and own timestamp are the source file's stamp in integer nanoseconds.
 
 Conversion streams frame by frame (memory stays flat whatever the sequence length), runs
-sequences in parallel worker processes, writes each log to a temporary file in the output folder
+sequences in parallel (worker processes here, or Ray tasks: :mod:`cldet.executors`), writes each log to a temporary file in the output folder
 and renames it into place only when complete. A bad sequence is reported and the others still
 convert.
 """
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import os
 import time
-from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass, field, replace
+from collections.abc import Sequence
+from contextlib import closing
+from dataclasses import dataclass, field
 from pathlib import Path
-from queue import Empty
-from typing import Any
 
 from cldet import __version__
 from cldet.errors import CldetError, DatasetError, LogError
+from cldet.executors import iter_outcomes
 from cldet.io import topics
 from cldet.io.files import atomic_output
 from cldet.io.mcap_write import Compression, LogWriter
 from cldet.io.transforms import sensor_tree
 from cldet.progress import NullProgress, Progress
-from cldet.signals import init_worker, stop_workers
 from cldet.stamps import format_stamp
 from cldet.types import ClassSample, Cloud, ImageFrame, PositionSample
 from converters import mmaud
@@ -159,7 +155,7 @@ def convert_sequence(
     return counts
 
 
-# --- one sequence to one file (runs in a worker process) -------------------------------------
+# --- one sequence to one file (runs in a worker) ---------------------------------------------
 @dataclass(frozen=True)
 class _Job:
     seq: mmaud.SequenceRef
@@ -167,7 +163,6 @@ class _Job:
     compression: Compression
     images: bool
     overwrite: bool
-    index: int = 0  # position in the run: tags the job's progress messages
 
 
 @dataclass(frozen=True)
@@ -178,7 +173,6 @@ class _Outcome:
     bytes_out: int = 0
     error: str | None = None
     cpu_seconds: float = 0.0
-    advanced: int = 0  # progress units the worker counted, in all (parallel runs only)
 
 
 def _source_bytes(seq: mmaud.SequenceRef, modalities: Sequence[str]) -> int:
@@ -212,83 +206,6 @@ def _run_job(job: _Job, progress: Progress) -> _Outcome:
         return _Outcome(job, error=f"{err.filename or job.target}: {err.strerror or err}")
 
 
-class _QueueProgress:
-    """Forwards a worker's progress to the parent in batches of ``(job index, n)`` messages.
-
-    The queue only makes the bar move while a job runs: the job's outcome carries its total
-    (``counted``), which the parent's :class:`_ProgressLedger` settles exactly.
-    """
-
-    def __init__(self, queue: Any, index: int) -> None:
-        self._queue = queue
-        self._index = index
-        self._pending = 0
-        self.counted = 0
-        self._last = time.monotonic()
-
-    def start(self, total: int, description: str) -> None:
-        """Totals are announced by the parent."""
-
-    def advance(self, n: int = 1) -> None:
-        """Count ``n`` frames; send the count every 64 frames or 0.2 s."""
-        self._pending += n
-        self.counted += n
-        now = time.monotonic()
-        if self._pending >= 64 or now - self._last > 0.2:
-            self.flush()
-            self._last = now
-
-    def flush(self) -> None:
-        """Send what has been counted."""
-        if self._pending:
-            self._queue.put((self._index, self._pending))
-            self._pending = 0
-
-
-class _ProgressLedger:
-    """The parent's side: forwards workers' counts once each, whatever order they arrive in.
-
-    Messages still in the queue when a job's outcome arrives are not lost: the outcome's total
-    settles the job (the difference is advanced at once) and its late messages are dropped.
-    """
-
-    def __init__(self, progress: Progress) -> None:
-        self._progress = progress
-        self._received: dict[int, int] = {}
-        self._settled: set[int] = set()
-
-    def message(self, index: int, n: int) -> None:
-        """A count from the queue."""
-        if index in self._settled:
-            return
-        self._received[index] = self._received.get(index, 0) + n
-        self._progress.advance(n)
-
-    def settle(self, index: int, total: int) -> None:
-        """The job is done and counted ``total`` in all."""
-        if index in self._settled:
-            return
-        self._settled.add(index)
-        rest = total - self._received.pop(index, 0)
-        if rest > 0:
-            self._progress.advance(rest)
-
-
-_worker_queue: Any = None
-
-
-def _init_worker(queue: Any, parent_pid: int) -> None:
-    global _worker_queue
-    _worker_queue = queue
-    init_worker(parent_pid)  # SIGTERM cleans up; the worker stops when the run's process dies
-
-
-def _worker(job: _Job) -> _Outcome:
-    progress = _QueueProgress(_worker_queue, job.index)
-    outcome = _run_job(job, progress)
-    return replace(outcome, advanced=progress.counted)
-
-
 # --- the whole dataset -----------------------------------------------------------------------
 @dataclass
 class _Tally:
@@ -312,59 +229,6 @@ class _Tally:
         self.bytes_out += outcome.bytes_out
 
 
-def _drain(queue: Any, ledger: _ProgressLedger) -> None:
-    """Forward the counts waiting in the queue (those in transit come with the outcomes)."""
-    while True:
-        try:
-            index, n = queue.get_nowait()
-        except Empty:
-            return
-        ledger.message(index, n)
-
-
-def _run_parallel(
-    jobs: list[_Job], workers: int, progress: Progress, record: Callable[[_Outcome], None]
-) -> None:
-    # forkserver: workers do not inherit the parent's threads (a progress bar's refresh thread),
-    # and fork from a server that has imported this module once, so they start in milliseconds.
-    # Like spawn, it imports the caller's __main__ in the workers: scripts need a main guard.
-    if "forkserver" in mp.get_all_start_methods():
-        ctx: Any = mp.get_context("forkserver")
-        ctx.set_forkserver_preload([__name__])
-    else:
-        ctx = mp.get_context("spawn")
-    queue = ctx.Queue()
-    executor = ProcessPoolExecutor(
-        max_workers=workers,
-        mp_context=ctx,
-        initializer=_init_worker,
-        initargs=(queue, os.getpid()),
-    )
-    ledger = _ProgressLedger(progress)
-    try:
-        pending: set[Future[_Outcome]] = {executor.submit(_worker, job) for job in jobs}
-        while pending:
-            done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-            _drain(queue, ledger)
-            for future in done:
-                outcome = future.result()
-                ledger.settle(outcome.job.index, outcome.advanced)
-                record(outcome)
-    except BrokenProcessPool as err:
-        raise CldetError(
-            f"a conversion worker process died ({err}); was it killed, or out of memory?"
-        ) from err
-    except BaseException:
-        # Ctrl-C, SIGTERM or an unexpected error: stop the running workers (they remove their
-        # temporary files) rather than wait for their sequences to finish.
-        stop_workers(executor)
-        raise
-    finally:
-        executor.shutdown(wait=True, cancel_futures=True)
-        queue.close()
-        queue.join_thread()
-
-
 def convert_dataset(
     root: Path,
     out: Path,
@@ -376,6 +240,8 @@ def convert_dataset(
     images: bool = True,
     overwrite: bool = False,
     progress: Progress | None = None,
+    executor: str = "local",
+    ray_address: str | None = None,
 ) -> ConvertReport:
     """Convert every selected sequence of a challenge dataset to ``out/<split>/<seqNNNN>.mcap``.
 
@@ -384,12 +250,15 @@ def convert_dataset(
         out: the output folder (created as needed).
         splits: splits to convert (default: all present).
         sequences: sequence names to convert, ``seq0001`` or ``seq1`` (default: all).
-        workers: sequences converted in parallel (default: the number of CPUs); 1 converts in
-            this process.
+        workers: sequences converted in parallel (default: the number of CPUs, or of the Ray
+            cluster's); 1 converts in this process (with the ``local`` executor).
         compression: chunk compression of the logs, ``zstd``, ``lz4`` or ``none``.
         images: also convert the camera images (the bulk of the data).
         overwrite: replace existing logs (otherwise they are skipped and reported).
         progress: told the total number of frames, then advanced per frame.
+        executor: ``local`` (worker processes here) or ``ray`` (a Ray task per sequence; see
+            :mod:`cldet.executors`). The logs are the same, byte for byte.
+        ray_address: with ``ray``, the cluster to join (default: a local Ray for the run).
 
     Returns:
         A :class:`ConvertReport`; a sequence that fails (a corrupt ``.npy``, a file that is not a
@@ -400,6 +269,7 @@ def convert_dataset(
         DatasetError: the root, a split or a requested sequence is missing.
         LogError: ``compression`` is unknown.
         CldetError: the output folder cannot be created.
+        ExecutorError: an unknown executor, Ray missing or unreachable, a worker process died.
     """
     started = time.perf_counter()
     bar = progress if progress is not None else NullProgress()
@@ -430,15 +300,17 @@ def convert_dataset(
         except OSError as err:
             raise CldetError(f"cannot create output folder {target.parent}: {err}") from err
         total += sum(n for m, n in counts.items() if images or m != "Image")
-        jobs.append(_Job(seq, target, codec, images, overwrite, index=len(jobs)))
+        jobs.append(_Job(seq, target, codec, images, overwrite))
 
     bar.start(total, "converting")
-    n_workers = min(workers if workers is not None else (os.cpu_count() or 1), len(jobs))
-    if n_workers <= 1:
-        for job in jobs:
-            tally.add(_run_job(job, bar))
-    else:
-        _run_parallel(jobs, n_workers, bar, tally.add)
+    outcomes = iter_outcomes(
+        _run_job, jobs, workers=workers, executor=executor, ray_address=ray_address, progress=bar
+    )
+    with closing(outcomes):
+        for outcome in outcomes:
+            if outcome.result is None:  # not a DatasetError or OSError: a crash, as in one process
+                outcome.raise_error()
+            tally.add(outcome.result)
 
     return ConvertReport(
         converted=tuple(sorted(tally.converted)),

@@ -365,22 +365,6 @@ def test_parallel_progress_counts_every_frame_exactly(tiny: Path, tmp_path: Path
     assert report.ok and report.frames == progress.total == progress.done > 0
 
 
-def test_progress_ledger_settles_counts_still_in_transit() -> None:
-    """Counts a worker queued but the parent had not read when the outcome came are not lost."""
-    progress = CountingProgress()
-    ledger = mcap_convert._ProgressLedger(progress)
-    ledger.message(0, 64)
-    ledger.message(1, 10)
-    ledger.settle(0, 100)  # job 0's last 36 were still in the queue
-    assert progress.done == 110
-    ledger.message(0, 36)  # ... and arrive late: dropped, not counted twice
-    ledger.settle(0, 100)
-    assert progress.done == 110
-    ledger.settle(1, 10)
-    ledger.settle(2, 5)  # a job whose messages never arrived at all
-    assert progress.done == 115
-
-
 @pytest.mark.parametrize("case", ["no-modality", "empty-modalities", "seq2-beside-seq0002"])
 @pytest.mark.parametrize("workers", [1, 2])
 def test_one_unusable_sequence_folder_does_not_stop_the_dataset(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import contextmanager
+from enum import Enum
 from typing import Annotated, TypeVar
 
 import typer
@@ -25,6 +26,34 @@ app = typer.Typer(
 )
 
 T = TypeVar("T")
+
+
+class ExecutorChoice(str, Enum):
+    """Where the files are processed (mirrors cldet.executors.EXECUTORS; kept here for a fast
+    --help)."""
+
+    local = "local"
+    ray = "ray"
+
+
+# help texts are rich markup: "\\[" keeps a bracket ("cldet[ray]") from being read as a style
+EXECUTOR_HELP = (
+    "local: worker processes on this machine. ray: one Ray task per file, for more cores than "
+    "one machine has: on a local Ray started for the run, or on the cluster at --ray-address. "
+    'Ray is an optional extra: pip install "cldet\\[ray]". The outputs are the same, byte for byte.'
+)
+RAY_ADDRESS_HELP = (
+    "With --executor ray: join this running Ray cluster instead of starting a local one, e.g. "
+    "auto (the cluster `ray start --head` runs on this machine), HOST:6379 or ray://HOST:10001. "
+    "Default: $RAY_ADDRESS when set (`ray job submit` sets it). Every node needs cldet "
+    "installed and the files at the same paths (a shared file system): tasks get paths, not data."
+)
+
+
+def check_executor(executor: ExecutorChoice, ray_address: str | None) -> None:
+    """``--ray-address`` goes with ``--executor ray``."""
+    if ray_address is not None and executor is not ExecutorChoice.ray:
+        raise CldetError("--ray-address goes with --executor ray")
 
 
 def echo_err(message: str) -> None:

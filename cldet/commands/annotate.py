@@ -9,7 +9,15 @@ from typing import Annotated
 
 import typer
 
-from cldet.commands._app import app, echo_err, handled
+from cldet.commands._app import (
+    EXECUTOR_HELP,
+    RAY_ADDRESS_HELP,
+    ExecutorChoice,
+    app,
+    check_executor,
+    echo_err,
+    handled,
+)
 
 
 class Method(str, Enum):
@@ -58,8 +66,18 @@ def annotate(
         bool, typer.Option("--no-rrd", help="Do not write the Rerun review recording.")
     ] = False,
     workers: Annotated[
-        int, typer.Option(help="Logs annotated in parallel (default: all cores).")
+        int,
+        typer.Option(
+            help="Logs annotated in parallel (default: all cores; with --executor ray: all of "
+            "the Ray cluster's)."
+        ),
     ] = 0,
+    executor: Annotated[
+        ExecutorChoice, typer.Option("--executor", help=EXECUTOR_HELP)
+    ] = ExecutorChoice.local,
+    ray_address: Annotated[
+        str | None, typer.Option("--ray-address", metavar="ADDR", help=RAY_ADDRESS_HELP)
+    ] = None,
     force: Annotated[
         bool,
         typer.Option(
@@ -153,11 +171,17 @@ def annotate(
     A Rerun recording (clouds, foreground, clusters, estimated and true trajectories, error over
     time, track events) is written beside each log: open it with `rerun LOG.rrd`.
 
+    Many logs, or more cores than one machine has: --executor ray annotates each log in a Ray
+    task, on a local Ray started for the run or on a running cluster (--ray-address auto, or
+    HOST:PORT), with the same results, byte for byte; it needs `pip install "cldet\\[ray]"`, and on
+    a cluster cldet on every node and the logs on a shared file system.
+
     A log being annotated is locked: a second run on it refuses. A symbolic link is annotated
     at its target (the link stays); a read-only log is refused unless --force. Ctrl-C and
     SIGTERM remove the temporary files.
 
-    Example: cldet annotate logs/val/*.mcap --method track
+    Examples: cldet annotate logs/val/*.mcap --method track;
+    cldet annotate logs/*/*.mcap --no-rrd --executor ray --ray-address auto
     """
     from cldet.config import load_config
     from cldet.errors import CldetError
@@ -173,6 +197,10 @@ def annotate(
             raise CldetError(f"--model goes with the track method, not {cfg.method}")
         if (output is not None or rrd is not None) and len(logs) != 1:
             raise CldetError("-o/--output and --rrd go with exactly one log")
+        check_executor(executor, ray_address)
+        on_ray = executor is ExecutorChoice.ray
+        if on_ray and (live or rrd is not None):
+            raise CldetError("--live and --rrd go with --executor local")
         if not live and (realtime or connect or no_rerun or foxglove is not None):
             raise CldetError("--realtime, --connect, --no-rerun and --foxglove go with --live")
         if live:
@@ -193,7 +221,7 @@ def annotate(
             )
             return
         with BarProgress() as bar:
-            if len(logs) == 1:
+            if len(logs) == 1 and not on_ray:
                 report = annotate_log_locked(
                     logs[0],
                     config=cfg,
@@ -212,14 +240,17 @@ def annotate(
                 reports, failures = annotate_logs(
                     logs,
                     config=cfg,
+                    outputs=[output] if output is not None else None,
                     write_rrd=not no_rrd,
-                    workers=workers or os.cpu_count() or 1,
+                    workers=workers or (None if on_ray else os.cpu_count() or 1),
                     force=force,
                     progress=bar,
                     lidar=lidar,
                     avia=avia,
                     truth=truth,
                     model=learned,
+                    executor=executor.value,
+                    ray_address=ray_address,
                 )
         for report in reports:
             typer.echo(report.describe())
