@@ -34,7 +34,7 @@ import traceback
 from collections.abc import Callable, Generator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from queue import Empty
 from typing import Any, Generic, NoReturn, TypeVar
 
@@ -119,6 +119,7 @@ def iter_outcomes(
     executor: str = "local",
     ray_address: str | None = None,
     progress: Progress | None = None,
+    costs: Sequence[float] | None = None,
 ) -> Generator[Outcome[R], None, None]:
     """Run ``fn(job, progress)`` on every job; yield each job's :class:`Outcome` as it completes.
 
@@ -136,6 +137,9 @@ def iter_outcomes(
             set (``ray job submit`` sets it), else a local Ray started for the run and shut down
             after it; a process connected to Ray already keeps its connection (left open).
         progress: receives the units ``fn`` reports, while each job runs.
+        costs: each job's expected cost (e.g. its file's size): the costliest start first, so
+            that the run does not end with one long job on one worker while the others idle
+            (longest-processing-time-first). Default: in the order given.
 
     Yields:
         One :class:`Outcome` per job, in the order they complete.
@@ -152,16 +156,34 @@ def iter_outcomes(
         raise ExecutorError("a Ray address goes with the ray executor")
     if workers is not None and workers < 1:
         raise ExecutorError(f"workers must be at least 1, not {workers}")
+    if costs is not None and len(costs) != len(jobs):
+        raise ExecutorError(f"{len(costs)} costs for {len(jobs)} jobs")
     progress = progress or NullProgress()
+    # the costliest first (stable: equal costs keep their order)
+    order = list(range(len(jobs)))
+    if costs is not None:
+        order.sort(key=lambda i: -costs[i])
+    ordered = [jobs[i] for i in order]
     if executor == "ray":
         ray = _import_ray()  # before any work: a missing Ray is one line, at once
         if not jobs:
             return _iter_here(fn, [], progress)
-        return _iter_ray(ray, fn, list(jobs), workers, ray_address, progress)
+        return _as_given(_iter_ray(ray, fn, ordered, workers, ray_address, progress), order)
     n_workers = min(workers or os.cpu_count() or 1, len(jobs))
     if n_workers <= 1:
-        return _iter_here(fn, list(jobs), progress)
-    return _iter_pool(fn, list(jobs), n_workers, progress)
+        return _as_given(_iter_here(fn, ordered, progress), order)
+    return _as_given(_iter_pool(fn, ordered, n_workers, progress), order)
+
+
+def _as_given(
+    outcomes: Generator[Outcome[R], None, None], order: list[int]
+) -> Generator[Outcome[R], None, None]:
+    """The outcomes of jobs run in ``order``, each with its index in the list given."""
+    try:
+        for outcome in outcomes:
+            yield replace(outcome, index=order[outcome.index])
+    finally:
+        outcomes.close()  # stop the workers when the caller stops early
 
 
 # --- in a worker: call the function, keep what it raised ------------------------------------

@@ -413,6 +413,14 @@ def annotate_log_locked(
         )
 
 
+def _size(path: Path) -> int:
+    """A file's size in bytes (0 when it cannot be read: its job reports why)."""
+    try:
+        return path.stat().st_size
+    except OSError:
+        return 0
+
+
 @dataclass(frozen=True)
 class _AnnotateJob:
     """One log of :func:`annotate_logs`, as a worker receives it."""
@@ -514,6 +522,7 @@ def annotate_logs(
         executor=executor,
         ray_address=ray_address,
         progress=progress,
+        costs=[_size(job.log) for job in jobs],  # the longest logs first
     )
     with closing(outcomes):
         for outcome in outcomes:

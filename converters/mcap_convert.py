@@ -284,6 +284,7 @@ def convert_dataset(
     for problem in problems:  # an empty folder, two folders for one sequence: the others go on
         tally.failed.append(ConvertFailure(f"{problem.split}/{problem.name}", problem.message))
     jobs: list[_Job] = []
+    costs: list[float] = []
     total = 0
     for seq in found:
         target = out / seq.split / f"{seq.name}.mcap"
@@ -299,12 +300,20 @@ def convert_dataset(
             target.parent.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise CldetError(f"cannot create output folder {target.parent}: {err}") from err
-        total += sum(n for m, n in counts.items() if images or m != "Image")
+        frames = sum(n for m, n in counts.items() if images or m != "Image")
+        total += frames
+        costs.append(frames)
         jobs.append(_Job(seq, target, codec, images, overwrite))
 
     bar.start(total, "converting")
     outcomes = iter_outcomes(
-        _run_job, jobs, workers=workers, executor=executor, ray_address=ray_address, progress=bar
+        _run_job,
+        jobs,
+        workers=workers,
+        executor=executor,
+        ray_address=ray_address,
+        progress=bar,
+        costs=costs,  # the longest sequences first
     )
     with closing(outcomes):
         for outcome in outcomes:

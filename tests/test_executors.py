@@ -59,6 +59,20 @@ def test_local_workers_are_other_processes_and_one_worker_is_this_one() -> None:
     assert os.getpid() not in pool and 1 <= len(pool) <= 2
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_costliest_jobs_start_first_and_keep_their_index(workers: int) -> None:
+    costs = [1.0, 5.0, 2.0, 7.0, 0.0, 3.0, 4.0]  # by cost: 3, 1, 6, 5, 2, 0, 4
+    progress = CountingProgress()
+    outcomes = list(
+        iter_outcomes(square, range(7), workers=workers, progress=progress, costs=costs)
+    )
+    check_square_outcomes(outcomes, progress)  # each result under the index of its job
+    if workers == 1:  # in this process, one after the other: the order they ran in
+        assert [o.index for o in outcomes] == [3, 1, 6, 5, 2, 0, 4]
+    with pytest.raises(ExecutorError, match="2 costs for 7 jobs"):
+        iter_outcomes(square, range(7), costs=[1.0, 2.0])
+
+
 def test_no_jobs_no_outcomes() -> None:
     assert list(iter_outcomes(square, [], workers=4)) == []
 
