@@ -109,18 +109,28 @@ class _Pool:
         self.used = np.zeros(len(self.frame), dtype=bool)
 
     def nearest(
-        self, frames: NDArray[np.int64], points: NDArray[np.float64], tol: float
+        self, frames: NDArray[np.int64] | int, points: NDArray[np.float64], tol: float
     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """Per (frame, point): the distance to that frame's nearest unused candidate within tol
-        (inf: none), and that candidate's index in the pool (-1: none)."""
+        (inf: none), and that candidate's index in the pool (-1: none). ``frames``: one frame
+        index per point, or one for all of them."""
         m = len(points)
         if m == 0 or len(self.frame) == 0:
             return np.full(m, np.inf), np.full(m, -1, dtype=np.int64)
         k = min(3, len(self.frame))
-        query = np.column_stack([points, self.times[frames] * _TIME_SCALE_M_PER_S])
-        d, j = self._st.query(query, k=k, distance_upper_bound=tol)
-        d, j = d.reshape(m, k), j.reshape(m, k)
-        idx = np.where(j < len(self.frame), j, -1)
+        if isinstance(frames, int):  # one frame: its own small tree
+            tree = self.trees.get(frames)
+            if tree is None:
+                return np.full(m, np.inf), np.full(m, -1, dtype=np.int64)
+            k = min(k, tree.n)
+            d, j = tree.query(points, k=k, distance_upper_bound=tol)
+            d, j = d.reshape(m, k), j.reshape(m, k)
+            idx = np.where(j < tree.n, j + self.start[frames], -1)
+        else:
+            query = np.column_stack([points, self.times[frames] * _TIME_SCALE_M_PER_S])
+            d, j = self._st.query(query, k=k, distance_upper_bound=tol)
+            d, j = d.reshape(m, k), j.reshape(m, k)
+            idx = np.where(j < len(self.frame), j, -1)
         d = np.where((idx >= 0) & ~self.used[np.maximum(idx, 0)], d, np.inf)
         best = np.argmin(d, axis=1)
         rows = np.arange(m)
@@ -199,7 +209,7 @@ def _count(
                 continue
             dt = tf - ta[sel]
             pred = pool.pos[a[sel]] + v[sel] * dt[:, None]
-            d, _ = pool.nearest(np.full(len(sel), f), pred, float(tol[sel].max()))
+            d, _ = pool.nearest(f, pred, float(tol[sel].max()))
             on = d <= tol[sel]
             found_seed.append(sel[on])
             found_place.append(np.floor(dt[on] * speed[sel[on]] / place[sel[on]]).astype(np.int64))
