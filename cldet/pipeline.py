@@ -47,7 +47,8 @@ from cldet.io.ros import FrameTransform
 from cldet.io.sources import (
     SensorTopics,
     iter_log_clouds,
-    iter_log_positions,
+    reader_clouds,
+    reader_positions,
     select_topics,
 )
 from cldet.io.spool import Spool
@@ -55,7 +56,7 @@ from cldet.io.transforms import log_tree
 from cldet.live import LiveOutput
 from cldet.progress import NullProgress, Progress
 from cldet.result_channels import result_additions
-from cldet.types import Cloud, Estimate, LidarFrame, Source
+from cldet.types import Cloud, Estimate, LidarFrame, PositionSample, Source
 from cldet.view import NullView, RerunView, TeeView, View
 
 METADATA_ANNOTATE = topics.METADATA_CONFIG
@@ -104,31 +105,54 @@ def _avia_extrinsic(cfg: FramesConfig) -> NDArray[np.float64] | None:
 
 
 def read_frames(
-    log: Path, sensors: SensorTopics, cfg: FramesConfig, lidar_frame: list[str] | None = None
+    log: Path,
+    sensors: SensorTopics,
+    cfg: FramesConfig,
+    lidar_frame: list[str] | None = None,
+    truth: list[PositionSample] | None = None,
 ) -> Iterator[LidarFrame]:
-    """The LiDAR's frames paired with the Avia's, both streamed (one pass over each topic).
+    """The LiDAR's frames paired with the Avia's, streamed in one pass over the log.
 
-    ``lidar_frame`` receives the LiDAR's frame id from its first cloud.
+    The topics are read through one reader, in step, so each chunk is decompressed once.
+    ``lidar_frame`` receives the LiDAR's frame id from its first cloud; ``truth``, when given,
+    receives the positions of ``sensors.truth`` (read in step with the frames, complete when
+    the frames are).
     """
     if lidar_frame is None:
         lidar_frame = []
     extrinsic = _avia_extrinsic(cfg)
+    with open_log(log) as reader:
 
-    def lidar() -> Iterator[Cloud]:
-        for cloud in iter_log_clouds(log, sensors.lidar):
-            if not lidar_frame:
-                lidar_frame.append(cloud.frame_id)
-            yield Cloud(stamp_ns=cloud.stamp_ns, points=cloud.points)
+        def lidar() -> Iterator[Cloud]:
+            for cloud in reader_clouds(reader, sensors.lidar):
+                if not lidar_frame:
+                    lidar_frame.append(cloud.frame_id)
+                yield Cloud(stamp_ns=cloud.stamp_ns, points=cloud.points)
 
-    def avia(topic: str) -> Iterator[Cloud]:
-        # into the LiDAR's frame through the log's /tf_static when it connects them, else by the
-        # configured extrinsic; pair_frames asks for the first LiDAR cloud before the first Avia
-        # cloud
-        into = lambda: lidar_frame[0] if lidar_frame else None  # noqa: E731
-        for cloud in iter_log_clouds(log, topic, target_frame=into, fallback=extrinsic):
-            yield Cloud(stamp_ns=cloud.stamp_ns, points=cloud.points)
+        def avia(topic: str) -> Iterator[Cloud]:
+            # into the LiDAR's frame through the log's /tf_static when it connects them, else by
+            # the configured extrinsic; pair_frames asks for the first LiDAR cloud before the
+            # first Avia cloud
+            into = lambda: lidar_frame[0] if lidar_frame else None  # noqa: E731
+            for cloud in reader_clouds(reader, topic, target_frame=into, fallback=extrinsic):
+                yield Cloud(stamp_ns=cloud.stamp_ns, points=cloud.points)
 
-    return pair_frames(lidar(), avia(sensors.avia) if sensors.avia else iter(()))
+        positions = (
+            reader_positions(reader, sensors.truth)
+            if truth is not None and sensors.truth
+            else iter(())
+        )
+        pending = next(positions, None)
+        for frame in pair_frames(lidar(), avia(sensors.avia) if sensors.avia else iter(())):
+            yield frame
+            while pending is not None and pending.stamp_ns <= frame.stamp_ns:
+                assert truth is not None
+                truth.append(pending)
+                pending = next(positions, None)
+        if pending is not None:
+            assert truth is not None
+            truth.append(pending)
+            truth.extend(positions)
 
 
 def annotate_log(
@@ -225,8 +249,9 @@ def annotate_log(
         estimator = make_estimator(config, model)
         progress.start(n_frames, f"{sequence}: tracking")
         lidar_frame: list[str] = []
+        truths: list[PositionSample] = []  # read in the same pass as the frames
         try:
-            for frame in read_frames(log, sensors, config.frames, lidar_frame):
+            for frame in read_frames(log, sensors, config.frames, lidar_frame, truths):
                 if live is not None:
                     live.pace(frame.stamp_ns)
                 in_hand = time.perf_counter()
@@ -240,7 +265,6 @@ def annotate_log(
             raise FrameOrderError(f"{log}: {err}") from err
         result = estimator.refine()
         view.log_result(result, detections)
-        truths = list(iter_log_positions(log, sensors.truth)) if sensors.truth else []
         rms_m: float | None = None
         truth_xyz: NDArray[np.float64] | None = None
         if truths:

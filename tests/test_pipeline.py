@@ -13,13 +13,15 @@ from mcap.reader import make_reader
 from typer.testing import CliRunner
 
 from cldet.cli import app
-from cldet.config import CldetConfig
+from cldet.config import CldetConfig, FramesConfig
 from cldet.core import estimator as estimator_module
 from cldet.errors import ConfigError, FrameOrderError, LogError
 from cldet.io import topics
-from cldet.io.mcap_read import iter_estimates, list_topics, read_metadata
+from cldet.io.mcap_read import iter_estimates, list_topics, open_log, read_metadata
 from cldet.io.mcap_write import LogWriter
-from cldet.pipeline import annotate_log, annotate_logs
+from cldet.io.sources import iter_log_positions, select_topics
+from cldet.pipeline import annotate_log, annotate_logs, read_frames
+from cldet.types import PositionSample
 
 
 def _messages(path: Path) -> list[tuple[str, int, int, bytes]]:
@@ -234,19 +236,32 @@ def test_track_beats_cl_det_on_unseen_seeds(
 def test_annotate_reads_the_log_once_and_writes_the_causal_estimate(
     source_log: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import cldet.pipeline
+    import cldet.io.mcap_read
 
-    reads: list[str] = []
-    real = cldet.pipeline.iter_log_clouds
+    # one pass: the LiDAR's, the Avia's and the truth's messages come from each chunk,
+    # decompressed once
+    decompressed: list[int] = []
+    real = cldet.io.mcap_read._chunk_data
 
-    def counting(log, topic, *args, **kwargs):  # type: ignore[no-untyped-def]
-        reads.append(topic)
-        return real(log, topic, *args, **kwargs)
+    def counting(record: bytes, offset: int) -> bytes:
+        decompressed.append(offset)
+        return real(record, offset)
 
-    monkeypatch.setattr(cldet.pipeline, "iter_log_clouds", counting)
+    monkeypatch.setattr(cldet.io.mcap_read, "_chunk_data", counting)
+    with open_log(source_log) as reader:
+        sensors = select_topics(reader)
+        n_chunks = len(reader.summary.chunk_indexes)
+    truth: list[PositionSample] = []
+    frames = list(read_frames(source_log, sensors, FramesConfig(), truth=truth))
+    assert n_chunks > 1 and sorted(decompressed) == sorted(set(decompressed))
+    assert len(decompressed) == n_chunks
+    expected = list(iter_log_positions(source_log, topics.GROUND_TRUTH))
+    assert [t.stamp_ns for t in truth] == [t.stamp_ns for t in expected]
+    np.testing.assert_array_equal([t.position for t in truth], [t.position for t in expected])
+    assert len(frames) == list_topics(source_log)[topics.LIDAR_360]
+
     out = tmp_path / "once.mcap"
     report = annotate_log(source_log, output=out, write_rrd=False)
-    assert sorted(reads) == ["/lidar_360", "/livox_avia"]  # one pass: each cloud topic once
     messages = _messages(out)
     causal = [m for m in messages if m[0] == "/cldet/causal"]
     refined = [m for m in messages if m[0] == "/cldet/estimate"]

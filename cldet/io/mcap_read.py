@@ -15,6 +15,7 @@ import heapq
 import os
 import struct
 import zlib
+from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from types import TracebackType
@@ -209,14 +210,15 @@ _DECOMPRESS: dict[str, Callable[[bytes, int], bytes]] = {
 _MESSAGE_OPCODE = 0x05
 _MAX_RUNS = 4  # more interleaved chunk runs than this: the generic reader
 _CHUNK_OPCODE = 0x06
+# decompressed chunks a reader keeps: iterators over several topics of one reader that move
+# through the log together (a LiDAR's and an Avia's frames) decompress each chunk once
+_CHUNKS_KEPT = 4
 
 
-def _chunk_messages(record: bytes, offset: int, ids: set[int] | None) -> list[Message]:
-    """The messages of one MCAP Chunk record (opcode, length and body), in log-time order.
+def _chunk_data(record: bytes, offset: int) -> bytes:
+    """The decompressed records of one MCAP Chunk record (opcode, length and body).
 
-    Parses the records with ``struct.unpack_from`` over the decompressed bytes, skipping
-    schema and channel records (the summary has them) and channels not in ``ids``. The chunk's
-    CRC is checked when the writer stored one.
+    The chunk's CRC is checked when the writer stored one.
 
     Raises:
         ValueError: the record is not a chunk, is truncated, or fails its CRC.
@@ -237,6 +239,18 @@ def _chunk_messages(record: bytes, offset: int, ids: set[int] | None) -> list[Me
         raise ValueError(f"chunk at byte {offset} decompressed to {len(data)} bytes, not {size}")
     if crc and zlib.crc32(data) != crc:
         raise ValueError(f"chunk at byte {offset} fails its CRC check")
+    return data
+
+
+def _chunk_messages(data: bytes, offset: int, ids: set[int] | None) -> list[Message]:
+    """The messages of one chunk's decompressed records (:func:`_chunk_data`), in log-time order.
+
+    Parses the records with ``struct.unpack_from``, skipping schema and channel records (the
+    summary has them) and channels not in ``ids``.
+
+    Raises:
+        ValueError: a record is truncated.
+    """
     view = memoryview(data)
     messages: list[Message] = []
     pos, end = 0, len(data)
@@ -340,6 +354,7 @@ class LogReader:
                 ) from err
         self._reader = reader
         self._summary: Summary = summary
+        self._chunks: OrderedDict[int, bytes] = OrderedDict()  # offset -> decompressed records
 
     def __enter__(self) -> LogReader:
         return self
@@ -585,9 +600,17 @@ class LogReader:
                 continue
             if end_ns is not None and index.message_start_time >= end_ns:
                 break
-            self._file.seek(index.chunk_start_offset)
-            record = self._file.read(index.chunk_length)
-            for message in _chunk_messages(record, index.chunk_start_offset, ids):
+            offset = index.chunk_start_offset
+            data = self._chunks.get(offset)
+            if data is None:
+                self._file.seek(offset)
+                data = _chunk_data(self._file.read(index.chunk_length), offset)
+                self._chunks[offset] = data
+                if len(self._chunks) > _CHUNKS_KEPT:
+                    self._chunks.popitem(last=False)
+            else:
+                self._chunks.move_to_end(offset)
+            for message in _chunk_messages(data, offset, ids):
                 if start_ns is not None and message.log_time < start_ns:
                     continue
                 if end_ns is not None and message.log_time >= end_ns:

@@ -35,6 +35,8 @@ __all__ = [
     "SensorTopics",
     "iter_log_clouds",
     "iter_log_positions",
+    "reader_clouds",
+    "reader_positions",
     "read_static_transforms",
     "select_topics",
 ]
@@ -220,27 +222,39 @@ def iter_log_clouds(
             malformed (names the log, topic, stamp and what was expected).
     """
     with open_log(path) as reader:
-        transforms = read_static_transforms(reader) if target_frame is not None else []
-        matrices: dict[str, NDArray[np.float64] | None] = {}
-        for cloud in _iter_clouds(reader, topic):
-            if callable(target_frame):
-                target_frame = target_frame()
-            if target_frame is None or cloud.frame_id == target_frame:
-                yield cloud
-                continue
-            if cloud.frame_id not in matrices:
-                found = (
-                    ros.static_transform(transforms, target_frame, cloud.frame_id)
-                    if transforms
-                    else None
-                )
-                matrices[cloud.frame_id] = found if found is not None else fallback
-            matrix = matrices[cloud.frame_id]
-            if matrix is None:
-                yield cloud
-                continue
-            points = ros.transform_points(matrix, cloud.points)
-            yield ros.StampedCloud(cloud.stamp_ns, target_frame, points)
+        yield from reader_clouds(reader, topic, target_frame=target_frame, fallback=fallback)
+
+
+def reader_clouds(
+    reader: LogReader,
+    topic: str,
+    *,
+    target_frame: str | Callable[[], str | None] | None = None,
+    fallback: NDArray[np.float64] | None = None,
+) -> Iterator[ros.StampedCloud]:
+    """:func:`iter_log_clouds` on an open log: several topics' iterators over one reader that
+    move through the log together decompress each chunk once."""
+    transforms = read_static_transforms(reader) if target_frame is not None else []
+    matrices: dict[str, NDArray[np.float64] | None] = {}
+    for cloud in _iter_clouds(reader, topic):
+        if callable(target_frame):
+            target_frame = target_frame()
+        if target_frame is None or cloud.frame_id == target_frame:
+            yield cloud
+            continue
+        if cloud.frame_id not in matrices:
+            found = (
+                ros.static_transform(transforms, target_frame, cloud.frame_id)
+                if transforms
+                else None
+            )
+            matrices[cloud.frame_id] = found if found is not None else fallback
+        matrix = matrices[cloud.frame_id]
+        if matrix is None:
+            yield cloud
+            continue
+        points = ros.transform_points(matrix, cloud.points)
+        yield ros.StampedCloud(cloud.stamp_ns, target_frame, points)
 
 
 def iter_log_positions(path: str | os.PathLike[str], topic: str) -> Iterator[PositionSample]:
@@ -251,17 +265,19 @@ def iter_log_positions(path: str | os.PathLike[str], topic: str) -> Iterator[Pos
     Raises:
         LogError: the log cannot be read; CorruptMessageError: a message does not decode.
     """
+    with open_log(path) as reader:
+        yield from reader_positions(reader, topic)
+
+
+def reader_positions(reader: LogReader, topic: str) -> Iterator[PositionSample]:
+    """:func:`iter_log_positions` on an open log."""
     decoders = _Decoders(ros.message_decoder)
 
     def convert(kind: str, schema: Any, channel: Any, data: bytes) -> PositionSample:
         stamp, xyz = ros.position_of(decoders.decode(schema, channel, data), kind)
         return PositionSample(stamp, xyz)
 
-    with open_log(path) as reader:
-        if _kind(reader.schema_name(topic)) in (
-            topics.SCHEMA_POSE_IN_FRAME,
-            topics.SCHEMA_ESTIMATE,
-        ):
-            yield from reader.iter_positions(topic)  # cldet's logs: log time = own stamp
-        else:
-            yield from _iter_decoded(reader, topic, convert)
+    if _kind(reader.schema_name(topic)) in (topics.SCHEMA_POSE_IN_FRAME, topics.SCHEMA_ESTIMATE):
+        yield from reader.iter_positions(topic)  # cldet's logs: log time = own stamp
+    else:
+        yield from _iter_decoded(reader, topic, convert)
