@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import shutil
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 from cldet.simulate.dataset import simulate_sequence
@@ -27,14 +28,23 @@ def _simulate(job: tuple[Path, int, float]) -> int:
     return seed
 
 
-def simulated_logs(root: Path, seeds: list[int], duration: float, workers: int) -> list[Path]:
-    """Simulate ``seeds`` (``mixed`` scenario, labelled) under ``root/train/seq<seed>`` and
-    convert them to ``root/logs/train/seq<seed>.mcap``; the logs' paths.
+@dataclass(frozen=True)
+class SimData:
+    """A simulated dataset in the challenge layout and its MCAP logs."""
+
+    dataset: Path  # holds train/seq<seed>/ (.npy folders)
+    logs: list[Path]  # <root>/logs/train/seq<seed>.mcap, in the order of the seeds
+
+
+def simulated_logs(root: Path, seeds: list[int], duration: float, workers: int) -> SimData:
+    """Simulate ``seeds`` (``mixed`` scenario, labelled) under ``root/data/train/seq<seed>`` and
+    convert them to ``root/logs/train/seq<seed>.mcap``.
 
     What an earlier run left complete under ``root`` is reused.
     """
-    jobs = [(root / "train" / f"seq{seed}", seed, duration) for seed in seeds]
+    dataset = root / "data"
+    jobs = [(dataset / "train" / f"seq{seed}", seed, duration) for seed in seeds]
     with ProcessPoolExecutor(workers) as pool:
         list(pool.map(_simulate, jobs))
-    convert_dataset(root, root / "logs", splits=["train"], workers=workers, images=False)
-    return [root / "logs" / "train" / f"seq{seed}.mcap" for seed in seeds]
+    convert_dataset(dataset, root / "logs", splits=["train"], workers=workers, images=False)
+    return SimData(dataset, [root / "logs" / "train" / f"seq{seed}.mcap" for seed in seeds])
