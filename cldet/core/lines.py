@@ -247,15 +247,6 @@ def _grow(
         lo = int(np.searchsorted(times_s, t0 - cfg.line_window_s, side="left"))
         hi = int(np.searchsorted(times_s, t1 + cfg.line_window_s, side="right"))
         window = np.arange(lo, hi)
-        fits = (
-            constant_velocity_fit(
-                pool.t[idx[:_END_FIT]], pool.pos[idx[:_END_FIT]]
-            ),  # before the first inlier
-            constant_velocity_fit(pool.t[idx], pool.pos[idx]),  # between
-            constant_velocity_fit(
-                pool.t[idx[-_END_FIT:]], pool.pos[idx[-_END_FIT:]]
-            ),  # after the last
-        )
         todo = np.array(
             [f for f in window.tolist() if f not in members and f in pool.trees], dtype=np.int64
         )
@@ -265,8 +256,20 @@ def _grow(
         part = np.where(tf < t0, 0, np.where(tf > t1, 2, 1))
         pred = np.empty((len(todo), 3))
         tol = np.empty(len(todo))
-        for k, (p0, v, tm) in enumerate(fits):
+        # the frames before the first inlier follow the fit of the first _END_FIT inliers, those
+        # between them the fit of all, those after the last the fit of the last _END_FIT (one
+        # fit when there are no more inliers than that)
+        ends = (slice(None, _END_FIT), slice(None), slice(-_END_FIT, None))
+        whole: tuple[NDArray[np.float64], NDArray[np.float64], float] | None = None
+        for k, end in enumerate(ends):
             on = part == k
+            if not on.any():
+                continue
+            if len(idx) <= _END_FIT:
+                whole = whole or constant_velocity_fit(pool.t[idx], pool.pos[idx])
+                p0, v, tm = whole
+            else:
+                p0, v, tm = constant_velocity_fit(pool.t[idx[end]], pool.pos[idx[end]])
             pred[on] = p0 + np.outer(tf[on] - tm, v)
             tol[on] = _tolerance(float(np.linalg.norm(v)), cfg, half_scan_s)
         d, j = pool.nearest(todo, pred, float(tol.max()))
