@@ -57,6 +57,7 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
+from simdata import parse_seeds  # noqa: E402 (benchmarks/simdata.py, beside this script)
 
 METHODS: tuple[str, ...] = ("track-causal", "track", "track-model", "cl-det")
 FAIL_RMS_M = 1.0
@@ -72,19 +73,6 @@ PROBES: dict[str, dict[str, float]] = {
     "short-1.5s": {},
 }
 PROBE_DURATION_S = {"short-1.5s": 1.5}
-
-
-def parse_seeds(text: str) -> list[int]:
-    """``10000-10119``, ``1,2,5`` or a mix: ``10000-10009,10020``."""
-    out: list[int] = []
-    for part in text.split(","):
-        part = part.strip()
-        if "-" in part:
-            lo, hi = (int(v) for v in part.split("-", 1))
-            out.extend(range(lo, hi + 1))
-        elif part:
-            out.append(int(part))
-    return out
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:

@@ -25,6 +25,7 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+from simdata import parse_seeds  # benchmarks/simdata.py (the script's folder is on the path)
 
 from cldet.config import load_config
 from cldet.core.frames import pair_frames
@@ -34,20 +35,14 @@ from cldet.simulate.dataset import simulate_sequence
 from converters.mmaud import find_sequences, iter_clouds
 
 
-def _seeds(text: str) -> list[int]:
-    """``700-759`` or ``1,2,5``."""
-    if "-" in text:
-        lo, hi = (int(v) for v in text.split("-", 1))
-        return list(range(lo, hi + 1))
-    return [int(v) for v in text.split(",")]
-
-
 def main() -> None:
     """Simulate, estimate and print the per-scenario table."""
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--seeds", type=_seeds, default=_seeds("900-959"), help="e.g. 900-959")
+    parser.add_argument(
+        "--seeds", type=parse_seeds, default=parse_seeds("900-959"), help="e.g. 900-959"
+    )
     parser.add_argument("--duration", type=float, default=5.5, help="seconds per sequence")
     parser.add_argument("--method", choices=["track", "cl-det"], default="track")
     parser.add_argument("--config", type=Path, help="estimator configuration (YAML)")
