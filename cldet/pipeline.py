@@ -56,6 +56,7 @@ from cldet.io.transforms import log_tree
 from cldet.live import LiveOutput
 from cldet.progress import NullProgress, Progress
 from cldet.result_channels import result_additions
+from cldet.signals import check_terminated
 from cldet.types import Cloud, Estimate, LidarFrame, PositionSample, Source
 from cldet.view import NullView, RerunView, TeeView, View
 
@@ -252,6 +253,7 @@ def annotate_log(
         truths: list[PositionSample] = []  # read in the same pass as the frames
         try:
             for frame in read_frames(log, sensors, config.frames, lidar_frame, truths):
+                check_terminated()  # SIGTERM, should a C callback have swallowed its exception
                 if live is not None:
                     live.pace(frame.stamp_ns)
                 in_hand = time.perf_counter()

@@ -2,7 +2,8 @@
 
 - :func:`raise_on_sigterm` makes SIGTERM (what ``kill``, ``timeout``, systemd and Slurm send)
   raise :class:`Terminated`, a ``KeyboardInterrupt``: every ``finally`` runs, so temporary files
-  are removed exactly as on Ctrl-C.
+  are removed exactly as on Ctrl-C. Should a C callback swallow that exception,
+  :func:`check_terminated` raises it again at the next frame or before a result is committed.
 - :func:`init_worker` is the initializer of every worker pool: the worker raises on SIGTERM too,
   and stops when the process that started the run dies (even by SIGKILL), before it could rename
   a result into place.
@@ -24,6 +25,7 @@ from typing import Any
 
 __all__ = [
     "Terminated",
+    "check_terminated",
     "init_worker",
     "pid_alive",
     "raise_on_sigterm",
@@ -56,6 +58,18 @@ def sigterm_received() -> bool:
     blocking calls do): a plain ``KeyboardInterrupt`` after SIGTERM was still SIGTERM.
     """
     return _sigterm_received
+
+
+def check_terminated() -> None:
+    """Raise :class:`Terminated` when SIGTERM arrived but its exception went missing.
+
+    The handler's exception can be lost: raised while a C library runs a Python callback (numba
+    loading a cached kernel does), it is printed as "Exception ignored" and the run goes on. The
+    handler also sets a flag, and this checks it: call it where the work must not go on after
+    SIGTERM (at each frame, and before any result is renamed into place).
+    """
+    if _sigterm_received:
+        raise Terminated("terminated by signal SIGTERM")
 
 
 def raise_on_sigterm() -> None:

@@ -190,3 +190,31 @@ def test_signal_mid_annotate_leaves_the_log_intact(tmp_path: Path, sig: signal.S
     assert again.returncode == 0, again.stderr
     assert temporaries(tmp_path) == []  # the killed run's stale ones removed too
     assert list_topics(log)["/cldet/estimate"] == 20 and (tmp_path / "seq0001.rrd").exists()
+
+
+def test_a_sigterm_whose_exception_was_lost_still_stops_the_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """SIGTERM's exception can be swallowed by a C callback (numba's cache loader prints
+    "Exception ignored" and goes on); the handler's flag still stops the run at the next frame
+    and keeps any result from being renamed into place."""
+    from cldet import signals
+    from cldet.io import LogWriter
+    from cldet.io import topics as tp
+    from cldet.io.files import atomic_output
+    from cldet.pipeline import annotate_log
+
+    log = tmp_path / "seq0001.mcap"
+    rng = np.random.default_rng(2)
+    with open(log, "wb") as f, LogWriter(f) as writer:
+        for i in range(5):
+            points = rng.normal(0, 20, (50, 3)).astype(np.float32)
+            writer.write_cloud(tp.LIDAR_360, 10**18 + i * 10**8, points, tp.FRAME_MID360)
+    before = log.read_bytes()
+    monkeypatch.setattr(signals, "_sigterm_received", True)  # the handler ran, its raise was lost
+    with pytest.raises(signals.Terminated):
+        annotate_log(log, output=tmp_path / "out.mcap", write_rrd=False)
+    with pytest.raises(signals.Terminated), atomic_output(tmp_path / "other.bin") as stream:
+        stream.write(b"complete, but the run was terminated")
+    assert log.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["seq0001.mcap"]  # no output, no temporary

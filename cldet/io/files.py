@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import IO
 
 from cldet.errors import OutputError, OutputExistsError
-from cldet.signals import pid_alive
+from cldet.signals import check_terminated, pid_alive
 
 __all__ = [
     "atomic_output",
@@ -138,6 +138,7 @@ def commit(tmp: Path, target: Path, mode: int | None = None) -> None:
         target: the final name.
         mode: permission bits; default: ``target``'s when it exists, else ``0o666`` less the umask.
     """
+    check_terminated()  # a SIGTERM whose exception a C callback swallowed: no result
     if mode is None:
         try:
             mode = stat.S_IMODE(target.stat().st_mode)
