@@ -52,12 +52,14 @@ def _seeds(text: str) -> list[int]:
 
 def _simulate(job: tuple[Path, int, float, bool]) -> int:
     seq_dir, seed, duration, randomize = job
-    if not (seq_dir / "ground_truth").exists():
-        shutil.rmtree(seq_dir, ignore_errors=True)
+    if not seq_dir.exists():  # simulated aside and renamed: an interrupted run leaves no half
+        partial = seq_dir.parent / f".{seq_dir.name}.partial"
+        shutil.rmtree(partial, ignore_errors=True)
         if randomize:
-            write_world_sequence(seq_dir, seed, duration, labels=True, images=False)
+            write_world_sequence(partial, seed, duration, labels=True, images=False)
         else:
-            simulate_sequence(seq_dir, seed=seed, duration_s=duration, images=False)
+            simulate_sequence(partial, seed=seed, duration_s=duration, images=False)
+        partial.rename(seq_dir)
     return seed
 
 
