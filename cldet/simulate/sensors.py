@@ -94,8 +94,9 @@ class DetectionRange:
     Datasheets give the range (in 100 klx sunlight) to which a flat target of a given diffuse
     reflectivity is still detected. The Livox figures follow a power law ``R = R0 * rho^k``
     (least squares in log-log): the Mid-360's 40 m @ 10 % and 70 m @ 80 % give k = 0.27, the
-    Avia's 190 m @ 10 %, 230 m @ 20 % and 320 m @ 80 % give k = 0.25 (within 1.5 % of all three),
-    near the k = 1/4 of a received power ~ rho / r^4 (a beam that overfills the target).
+    Avia's 190 m @ 10 %, 230 m @ 20 % and 320 m @ 80 % give k = 0.25 (within 1.5 % of all three):
+    flatter than the k = 1/2 of an ideal flat target (received power ~ rho / r^2), as the
+    datasheets' own figures are (sunlight noise and the air's losses grow with range).
     """
 
     reflectivity: tuple[float, ...]  # reference reflectivities, 0-1
