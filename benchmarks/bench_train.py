@@ -10,6 +10,12 @@ sequences off by more than 1 m, and the confusion matrix of the test set.
     python benchmarks/bench_train.py                                 # 24 train / 48 test, 20 s
     python benchmarks/bench_train.py --train-seeds 50000-50011 --test-seeds 51000-51011 \\
         --duration 10 --work /tmp/bt                                 # development, quicker
+    python benchmarks/bench_train.py --randomize --train-seeds 10200-10247 --test-seeds none \\
+        --duration 8 --work /tmp/bt-worlds       # a model for bench_robustness.py --model
+
+``--randomize`` simulates randomised worlds (``cldet.simulate.draw_world``: sites, tilts, mounts,
+the robustness benchmark's generator) instead of the ``mixed`` scenario; use development world
+seeds (10000-19999), never the robustness benchmark's evaluation seeds (90000-90299).
 
 Seeds: 50000-59999 are for development; report on seeds never looked at (the defaults,
 70000-70023 and 71000-71047, were run once, after the last change).
@@ -32,26 +38,38 @@ from cldet.export import export_results
 from cldet.modelfile import load_model
 from cldet.pipeline import annotate_logs
 from cldet.simulate.dataset import simulate_sequence
+from cldet.simulate.randomized import write_world_sequence
 from cldet.train import train_logs
 from converters.mcap_convert import convert_dataset
 
 
 def _seeds(text: str) -> list[int]:
+    if text == "none":
+        return []
     lo, _, hi = text.partition("-")
     return list(range(int(lo), int(hi or lo) + 1))
 
 
-def _simulate(job: tuple[Path, int, float]) -> int:
-    seq_dir, seed, duration = job
-    if not (seq_dir / "ground_truth").exists():
-        shutil.rmtree(seq_dir, ignore_errors=True)
-        simulate_sequence(seq_dir, seed=seed, duration_s=duration, images=False)
+def _simulate(job: tuple[Path, int, float, bool]) -> int:
+    seq_dir, seed, duration, randomize = job
+    if not seq_dir.exists():  # simulated aside and renamed: an interrupted run leaves no half
+        partial = seq_dir.parent / f".{seq_dir.name}.partial"
+        shutil.rmtree(partial, ignore_errors=True)
+        if randomize:
+            write_world_sequence(partial, seed, duration, labels=True, images=False)
+        else:
+            simulate_sequence(partial, seed=seed, duration_s=duration, images=False)
+        partial.rename(seq_dir)
     return seed
 
 
-def _dataset(root: Path, seeds: list[int], duration: float, workers: int) -> list[Path]:
+def _dataset(
+    root: Path, seeds: list[int], duration: float, workers: int, randomize: bool = False
+) -> list[Path]:
     """Simulate ``seeds`` under ``root/train/seq<seed>`` and convert them; the logs' paths."""
-    jobs = [(root / "train" / f"seq{seed}", seed, duration) for seed in seeds]
+    if not seeds:
+        return []
+    jobs = [(root / "train" / f"seq{seed}", seed, duration, randomize) for seed in seeds]
     with ProcessPoolExecutor(workers) as pool:
         list(pool.map(_simulate, jobs))
     convert_dataset(root, root / "logs", splits=["train"], workers=workers, images=False)
@@ -86,17 +104,21 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--train-seeds", default="70000-70023")
-    parser.add_argument("--test-seeds", default="71000-71047")
+    parser.add_argument("--test-seeds", default="71000-71047", help="'none': train only")
     parser.add_argument("--duration", type=float, default=20.0, help="seconds per sequence")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--work", type=Path, help="keep (and reuse) the data here")
+    parser.add_argument(
+        "--randomize", action="store_true", help="randomised worlds (development seeds only)"
+    )
     args = parser.parse_args()
 
     work = args.work or Path(tempfile.mkdtemp(prefix="cldet-bench-train-"))
     work.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    train = _dataset(work / "train", _seeds(args.train_seeds), args.duration, args.workers)
-    test = _dataset(work / "test", _seeds(args.test_seeds), args.duration, args.workers)
+    train_seeds, test_seeds = _seeds(args.train_seeds), _seeds(args.test_seeds)
+    train = _dataset(work / "train", train_seeds, args.duration, args.workers, args.randomize)
+    test = _dataset(work / "test", test_seeds, args.duration, args.workers, args.randomize)
     print(
         f"data: {len(train)} train / {len(test)} test logs of {args.duration:.0f} s"
         f" ({time.perf_counter() - t0:.0f} s to simulate and convert)"
@@ -107,6 +129,9 @@ def main() -> None:
     report = train_logs(train, model, overwrite=True, warn=lambda m: print("WARNING:", m))
     print("\n== cldet train (one core; includes the cross-validation) ==")
     print(report.describe())
+    print(f"model: {model}")
+    if not test:
+        return
 
     print("\n== test logs ==")
     results = {

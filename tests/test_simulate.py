@@ -439,6 +439,80 @@ def test_avia_is_about_4_7_times_denser(sequences: dict[str, tuple[Path, Sequenc
     assert 0.5 < seen / expected < 2.0
 
 
+# --- return rates: the airframe's reflectivity and the LiDAR's detection range ---------------
+
+
+def _empty_scene() -> object:
+    from cldet.simulate.scene import Scene
+
+    no3, no5 = np.zeros((0, 3)), np.zeros((0, 5))
+    none = np.zeros(0, dtype=np.intp)
+    return Scene(-50.0, np.zeros((0, 4)), no3, no3, none, no5, none, no3, np.zeros(0), none, no5)
+
+
+def _drone_return_rate(
+    size: tuple[float, float, float], reflectivity: float, r: float, sensor: object
+) -> float:
+    """Share of rays aimed at a hovering box (elevation 60 deg, range ``r``) that return a point."""
+    from cldet.simulate.flight import Mover, Track
+    from cldet.simulate.scene import DRONE
+    from cldet.simulate.sensors import scan
+
+    rng = np.random.default_rng(7)
+    el = np.radians(60.0)
+    centre = r * np.array([np.cos(el), 0.0, np.sin(el)])
+    times = np.array([-1.0, 1.0])
+    track = Track(times, np.vstack([centre, centre]), np.zeros(2))
+    half = tuple(0.5 * s for s in size)
+    drone = Mover("drone", DRONE, "box", half, track, reflectivity=reflectivity)
+    # rays through points spread over the box's bottom face (seen from below)
+    aims = centre + rng.uniform(-0.4, 0.4, (4000, 3)) * np.array(size)
+    dirs = aims / np.linalg.norm(aims, axis=1, keepdims=True)
+    _, valid, kind = scan(dirs, 0.0, _empty_scene(), [drone], rng, sensor=sensor)  # type: ignore[arg-type]
+    on = kind == DRONE
+    assert on.mean() > 0.9  # the rays do hit the box
+    return float(np.mean(valid[on]))
+
+
+def test_detection_range_law_reproduces_the_datasheets() -> None:
+    """The fitted power law passes through the published ranges and grows with reflectivity."""
+    from cldet.simulate.sensors import AVIA_RANGE, MID360_RANGE
+
+    for sensor in (MID360_RANGE, AVIA_RANGE):
+        fitted = sensor.range_at(np.array(sensor.reflectivity))
+        np.testing.assert_allclose(fitted, sensor.range_m, rtol=0.02)
+        k, _ = sensor.exponent()
+        assert 0.0 < k < 0.5  # brighter goes further, less than the extended-target square root
+    assert MID360_RANGE.range_at(np.array([0.8]))[0] == pytest.approx(70.0)  # the scene's fade
+
+
+def test_a_brighter_airframe_returns_more_points_and_none_beyond_its_range() -> None:
+    """Same size and range: a white airframe outlasts a dark one; beyond the range, no point."""
+    from cldet.simulate.sensors import AVIA_RANGE, MID360_RANGE
+
+    size = (0.35, 0.29, 0.11)
+    dark, white = 0.10, 0.80
+    # well within both ranges the returns do not depend on the reflectivity
+    near_dark = _drone_return_rate(size, dark, 20.0, MID360_RANGE)
+    near_white = _drone_return_rate(size, white, 20.0, MID360_RANGE)
+    assert near_dark == pytest.approx(near_white, abs=0.05)
+    # beyond the dark airframe's 40 m (Mid-360 @ 10 %), within the white one's 70 m
+    for r in (45.0, 50.0):
+        assert _drone_return_rate(size, white, r, MID360_RANGE) > 1.5 * _drone_return_rate(
+            size, dark, r, MID360_RANGE
+        )
+    assert _drone_return_rate(size, dark, 60.0, MID360_RANGE) == 0.0
+    assert _drone_return_rate(size, white, 100.0, MID360_RANGE) == 0.0
+    # the Avia reaches 190 m even at 10 %: a dark airframe at 100 m still returns
+    assert _drone_return_rate(size, dark, 100.0, AVIA_RANGE) > 0.5
+
+
+def test_drone_types_have_physical_reflectivities() -> None:
+    from cldet.simulate import DRONE_TYPES
+
+    assert all(0.0 < d.reflectivity <= 1.0 for d in DRONE_TYPES)
+
+
 # --- ray casting invariants ------------------------------------------------------------------
 
 _coord = st.floats(-20, 20, allow_nan=False)

@@ -26,19 +26,28 @@ _MIN_RANGE_M = 2.0  # the drone never comes nearer the sensor than this
 
 @dataclass(frozen=True)
 class DroneType:
-    """A drone class: name and body box size (length, width, height in metres)."""
+    """A drone class: name, body box size (length, width, height in metres) and the airframe's
+    diffuse reflectivity at the LiDARs' 905 nm (0-1), which sets how far each LiDAR still
+    detects it (``cldet.simulate.sensors.DetectionRange``)."""
 
     class_id: int
     name: str
     size_m: tuple[float, float, float]
+    reflectivity: float
 
 
 # Class ids follow the challenge site's listing order (Mavic 3, M30, M300, Phantom 4).
+# Reflectivities are ASSUMPTIONS from each airframe's colour and finish: no 905 nm measurement of
+# these airframes is published. Dark grey or black plastic is given 0.10, the dark reference of
+# the Livox datasheets (black plastic can be lower, ~0.05); white paint 0.80, their bright
+# reference. Gloss (the Phantom 4) also reflects part of the light away specularly: not modelled.
 DRONE_TYPES: tuple[DroneType, ...] = (
-    DroneType(0, "Mavic 3", (0.35, 0.29, 0.11)),
-    DroneType(1, "M30", (0.47, 0.58, 0.22)),
-    DroneType(2, "M300", (0.81, 0.67, 0.43)),
-    DroneType(3, "Phantom 4", (0.30, 0.30, 0.19)),
+    DroneType(0, "Mavic 3", (0.35, 0.29, 0.11), 0.10),  # dark grey plastic shell
+    DroneType(1, "M30", (0.47, 0.58, 0.22), 0.10),  # dark grey / black body and arms
+    DroneType(2, "M300", (0.81, 0.67, 0.43), 0.10),  # M300 RTK: dark grey body and arms
+    # the common Phantom 4 (Pro, Advanced, RTK) is white gloss plastic; an "Obsidian" edition is
+    # matte dark grey: which one MMAUD flew is not documented (white assumed)
+    DroneType(3, "Phantom 4", (0.30, 0.30, 0.19), 0.80),
 )
 
 
@@ -72,6 +81,9 @@ class Mover:
     dims: tuple[float, ...]
     track: Track
     active_s: tuple[float, float] = field(default=(-np.inf, np.inf))  # visible only in this window
+    # diffuse reflectivity at 905 nm (0-1): its returns follow the LiDAR's published detection
+    # range at that reflectivity; None: the surface kind's fixed probability and range fade
+    reflectivity: float | None = None
 
     def bounding_radius(self) -> float:
         """Radius (m) of a sphere around the reference point that contains the shape."""
@@ -316,9 +328,9 @@ def plan_drone(
 
 
 def drone_mover(track: Track, drone: DroneType) -> Mover:
-    """The drone as a box (its class's body size) following ``track``."""
+    """The drone as a box (its class's body size and reflectivity) following ``track``."""
     half = tuple(0.5 * s for s in drone.size_m)
-    return Mover("drone", DRONE, "box", half, track)
+    return Mover("drone", DRONE, "box", half, track, reflectivity=drone.reflectivity)
 
 
 def plan_person(

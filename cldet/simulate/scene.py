@@ -20,7 +20,8 @@ F64 = NDArray[np.float64]
 # Surface kinds: index into HIT_PROBABILITY / PENETRATION_M.
 GROUND, BUILDING, CAR, POLE, TRUNK, CANOPY, BUSH, DRONE, PERSON, BIRD = range(10)
 # Probability that a ray hitting this kind of surface returns a point (before range fading).
-# The drone's 0.9 makes the Mid-360 put ~3000 * A / r^2 points on it (A = projected box area, m^2).
+# The drone's 0.9 makes the Mid-360 put ~3000 * A / r^2 points on it (A = projected box area, m^2)
+# within the detection range for its airframe's reflectivity (sensors.DetectionRange).
 HIT_PROBABILITY = np.array([0.85, 0.95, 0.85, 0.9, 0.9, 0.5, 0.55, 0.9, 0.8, 0.6])
 # Mean extra depth (m) of a return below the surface: porous vegetation returns from inside.
 PENETRATION_M = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.25, 0.12, 0.0, 0.0, 0.0])

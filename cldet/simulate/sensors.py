@@ -2,8 +2,10 @@
 
 Scans fire a fresh set of random directions every frame (a non-repetitive pattern), each ray at its
 own instant within the 100 ms scan, against the static scene and the movers. A ray returns a point
-with a probability set by the surface and a fade beyond ~70 m; the range gets ~2 cm of noise and
-every coordinate is rounded to millimetres and stored as a float32 value (as the real files).
+with a probability set by the surface and a fade beyond ~70 m; on the drone, whose airframe has a
+known reflectivity, the fade starts instead at the sensor's published detection range for that
+reflectivity (``DetectionRange``). The range gets ~2 cm of noise and every coordinate is rounded
+to millimetres and stored as a float32 value (as the real files).
 Rays without a return are zero rows: (0, 0, 0) for the Mid-360, (-0.0, -0.0, +0.0) for the Avia.
 """
 
@@ -37,7 +39,7 @@ SCAN_PERIOD_S = 0.1  # each scan spans [stamp, stamp + 100 ms)
 MID360_ELEVATION_DEG = (-7.0, 52.0)
 AVIA_MIN_ELEVATION_DEG = 52.0
 RANGE_NOISE_M = 0.02
-FADE_START_M = 70.0
+FADE_START_M = 70.0  # = the Mid-360's detection range at 80 % reflectivity (see MID360_RANGE)
 AVIA_DENSITY_SCALE = 0.85  # Avia per-ray return probability relative to the Mid-360 (~4.7x denser)
 _GRAZE_FULL = np.sin(np.radians(3.0))  # below this incidence the ground fades out
 _GRASS_M = 0.03  # mean depth of ground returns below the surface (grass), metres
@@ -85,16 +87,64 @@ def avia_directions(rng: np.random.Generator, rows: int = AVIA_ROWS) -> F64:
     return np.column_stack([sz * np.cos(az), sz * np.sin(az), cz])
 
 
+@dataclass(frozen=True)
+class DetectionRange:
+    """A LiDAR's published detection range at reference reflectivities, and the law fitted to it.
+
+    Datasheets give the range (in 100 klx sunlight) to which a flat target of a given diffuse
+    reflectivity is still detected. The Livox figures follow a power law ``R = R0 * rho^k``
+    (least squares in log-log): the Mid-360's 40 m @ 10 % and 70 m @ 80 % give k = 0.27, the
+    Avia's 190 m @ 10 %, 230 m @ 20 % and 320 m @ 80 % give k = 0.25 (within 1.5 % of all three):
+    flatter than the k = 1/2 of an ideal flat target (received power ~ rho / r^2), as the
+    datasheets' own figures are (sunlight noise and the air's losses grow with range).
+    """
+
+    reflectivity: tuple[float, ...]  # reference reflectivities, 0-1
+    range_m: tuple[float, ...]  # published detection range at each, metres
+
+    def exponent(self) -> tuple[float, float]:
+        """(k, log R0) of the fitted law ``log R = log R0 + k log rho``."""
+        k, log_r0 = np.polyfit(np.log(self.reflectivity), np.log(self.range_m), 1)
+        return float(k), float(log_r0)
+
+    def range_at(self, reflectivity: F64) -> F64:
+        """Detection range (m) at each reflectivity (0-1) by the fitted law."""
+        k, log_r0 = self.exponent()
+        return np.asarray(np.exp(log_r0 + k * np.log(reflectivity)), dtype=np.float64)
+
+
+# Livox datasheets, detection range @ 100 klx (Mid-360 user manual; Avia specifications).
+MID360_RANGE = DetectionRange((0.10, 0.80), (40.0, 70.0))
+AVIA_RANGE = DetectionRange((0.10, 0.20, 0.80), (190.0, 230.0, 320.0))
+
+
 def _fade(r: F64) -> F64:
     """Return probability factor for range: 1 up to 70 m, then a Gaussian roll-off, none beyond 95 m."""
     f = np.exp(-(((r - FADE_START_M) / 12.0) ** 2))
     return np.where(r <= FADE_START_M, 1.0, np.where(r < 95.0, f, 0.0))
 
 
+def reflectivity_fade(r: F64, reflectivity: F64, sensor: DetectionRange) -> F64:
+    """Return probability factor for a target of known reflectivity (0-1) at range ``r`` (m).
+
+    The simulator's range fade (``_fade``, which starts at the Mid-360's 70 m @ 80 %) stretched
+    to the sensor's detection range at that reflectivity: 1 up to it, a Gaussian roll-off over
+    the next 12/70 of it, none beyond 95/70 of it. A white airframe on the Mid-360 keeps the
+    old fade; a dark one (10 %) fades from 40 m, gone at 54 m; on the Avia both reach 190 m+.
+    """
+    return _fade(r * (FADE_START_M / sensor.range_at(reflectivity)))
+
+
 def _cast_movers(
-    dirs: F64, ray_t: F64, movers: list[Mover], dist: F64, kind: NDArray[np.intp]
+    dirs: F64,
+    ray_t: F64,
+    movers: list[Mover],
+    dist: F64,
+    kind: NDArray[np.intp],
+    reflectivity: F64,
 ) -> None:
-    """Update ``dist``/``kind`` in place with the movers' surfaces (each ray at its own instant)."""
+    """Update ``dist``/``kind``/``reflectivity`` in place with the movers' surfaces (each ray at
+    its own instant); ``reflectivity`` is NaN where the surface has none of its own."""
     t_mid = float(ray_t[len(ray_t) // 2]) if len(ray_t) else 0.0
     t_lo = float(ray_t.min()) if len(ray_t) else 0.0
     t_hi = float(ray_t.max()) if len(ray_t) else 0.0
@@ -128,6 +178,7 @@ def _cast_movers(
         better = t < dist[cand]
         dist[cand[better]] = t[better]
         kind[cand[better]] = mover.kind
+        reflectivity[cand[better]] = np.nan if mover.reflectivity is None else mover.reflectivity
 
 
 def _to_points(dirs: F64, r: F64) -> NDArray[np.float32]:
@@ -144,6 +195,7 @@ def scan(
     rng: np.random.Generator,
     density_scale: float = 1.0,
     rotation: F64 | None = None,
+    sensor: DetectionRange = MID360_RANGE,
 ) -> tuple[F64, NDArray[np.bool_], NDArray[np.intp]]:
     """Ray-cast one frame: each ray fired at ``stamp_s + i/rows * 100 ms``.
 
@@ -156,6 +208,7 @@ def scan(
         density_scale: multiplies every return probability (sensor sensitivity).
         rotation: (3, 3) sensor-to-scene rotation (a tilted mount): rays are cast along
             ``rotation @ d`` in the scene, points are returned in the sensor's frame. None: level.
+        sensor: the LiDAR's detection range, for movers with a reflectivity (the drone).
 
     Returns:
         (rows, 3) float64 points in the sensor's frame (rows without a return hold zeros),
@@ -166,10 +219,14 @@ def scan(
     ray_t = stamp_s + SCAN_PERIOD_S * np.arange(rows) / rows
     cast_dirs = dirs if rotation is None else dirs @ rotation.T  # scene frame
     dist, kind = scene.cast(cast_dirs, stamp_s + SCAN_PERIOD_S / 2, rng)
-    _cast_movers(cast_dirs, ray_t, movers, dist, kind)
+    refl = np.full(rows, np.nan)
+    _cast_movers(cast_dirs, ray_t, movers, dist, kind, refl)
     hit = np.isfinite(dist)
     prob = np.zeros(rows)
     prob[hit] = HIT_PROBABILITY[kind[hit]] * _fade(dist[hit]) * density_scale
+    known = np.isfinite(refl)  # on a mover of known reflectivity: the sensor's own range for it
+    fade = reflectivity_fade(dist[known], refl[known], sensor)
+    prob[known] = HIT_PROBABILITY[kind[known]] * fade * density_scale
     # the ground returns less at grazing incidence and from inside the grass
     ground = kind == GROUND
     sin_graze = np.maximum(-scene.ground_up_component(cast_dirs), 1e-3)
@@ -230,7 +287,7 @@ def avia_frame(
     """
     dirs = avia_directions(rng)
     points, valid, kind = scan(
-        dirs, stamp_s, scene, movers, rng, AVIA_DENSITY_SCALE, rotation=rotation
+        dirs, stamp_s, scene, movers, rng, AVIA_DENSITY_SCALE, rotation=rotation, sensor=AVIA_RANGE
     )
     on_drone = valid & (kind == DRONE)
     drone = int(np.count_nonzero(on_drone))
