@@ -284,3 +284,21 @@ def test_two_clouds_with_one_stamp_are_a_clear_error_and_the_cli_goes_on(tmp_pat
     result = CliRunner().invoke(app, ["annotate", str(bad), "--no-rrd"])
     assert result.exit_code != 0
     assert "repeats the stamp" in result.output and "Traceback" not in result.output
+
+
+def test_a_folder_stands_for_every_log_under_it(source_log: Path, tmp_path: Path) -> None:
+    logs = tmp_path / "logs"
+    (logs / "val").mkdir(parents=True)
+    shutil.copy(source_log, logs / "a.mcap")
+    shutil.copy(source_log, logs / "val" / "b.mcap")
+    (logs / ".b.mcap.12345.tmp.mcap").write_bytes(b"a run's temporary file")  # left out
+    result = CliRunner().invoke(app, ["annotate", str(logs), "--no-rrd", "--workers", "1"])
+    assert result.exit_code == 0, result.output
+    for log in (logs / "a.mcap", logs / "val" / "b.mcap"):
+        assert list_topics(log).get(topics.ESTIMATE), log
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    result = CliRunner().invoke(app, ["annotate", str(empty), "--no-rrd"])
+    assert result.exit_code == 1
+    assert f"{empty} is a folder with no MCAP log" in result.output
+    assert "Traceback" not in result.output

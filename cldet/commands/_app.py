@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from enum import Enum
+from pathlib import Path
 from typing import Annotated, TypeVar
 
 import typer
@@ -54,6 +55,29 @@ def check_executor(executor: ExecutorChoice, ray_address: str | None) -> None:
     """``--ray-address`` goes with ``--executor ray``."""
     if ray_address is not None and executor is not ExecutorChoice.ray:
         raise CldetError("--ray-address goes with --executor ray")
+
+
+def expand_logs(paths: Sequence[Path]) -> list[Path]:
+    """The logs named: a file as it is; a folder as every ``*.mcap`` under it, sorted (hidden
+    names, such as a run's temporary files, left out).
+
+    Raises:
+        CldetError: a folder holds no MCAP log.
+    """
+    logs: list[Path] = []
+    for path in paths:
+        if not path.is_dir():
+            logs.append(path)  # a missing file is reported by whoever opens it
+            continue
+        found = sorted(
+            p
+            for p in path.rglob("*.mcap")
+            if p.is_file() and not any(part.startswith(".") for part in p.relative_to(path).parts)
+        )
+        if not found:
+            raise CldetError(f"{path} is a folder with no MCAP log (*.mcap) in it")
+        logs.extend(found)
+    return logs
 
 
 def echo_err(message: str) -> None:

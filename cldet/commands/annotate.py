@@ -16,6 +16,7 @@ from cldet.commands._app import (
     app,
     check_executor,
     echo_err,
+    expand_logs,
     handled,
 )
 
@@ -32,7 +33,8 @@ def annotate(
     logs: Annotated[
         list[Path],
         typer.Argument(
-            help="MCAP logs written by `cldet convert`, or ROS 2 recordings in MCAP.",
+            help="MCAP logs written by `cldet convert`, or ROS 2 recordings in MCAP; a folder"
+            " stands for every .mcap under it.",
             show_default=False,
         ),
     ],
@@ -190,6 +192,7 @@ def annotate(
     from cldet.progress import BarProgress
 
     with handled():
+        logs = expand_logs(logs)
         overrides = {"method": method.value} if method is not None else None
         cfg = load_config(config, overrides=overrides)
         learned = load_model(model) if model is not None else None

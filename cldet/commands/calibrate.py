@@ -7,14 +7,17 @@ from typing import Annotated
 
 import typer
 
-from cldet.commands._app import app, handled
+from cldet.commands._app import app, expand_logs, handled
 
 
 @app.command()
 def calibrate(
     logs: Annotated[
         list[Path],
-        typer.Argument(help="Training logs annotated with zero bias (they hold /ground_truth)."),
+        typer.Argument(
+            help="Training logs annotated with zero bias (they hold /ground_truth); a folder"
+            " stands for every .mcap under it."
+        ),
     ],
     out: Annotated[
         Path, typer.Option("-o", "--out", help="YAML configuration to write (the `bias:` section).")
@@ -39,7 +42,7 @@ def calibrate(
     from cldet.calibrate import calibrate_logs, write_bias_config
 
     with handled():
-        calibration = calibrate_logs(logs)
+        calibration = calibrate_logs(expand_logs(logs))
         write_bias_config(calibration, out, overwrite=overwrite)
     typer.echo(calibration.describe())
     typer.echo(f"wrote {out}: use it with `cldet annotate --config {out}`")

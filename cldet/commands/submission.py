@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from cldet.commands._app import app, echo_err, handled
+from cldet.commands._app import app, echo_err, expand_logs, handled
 
 if TYPE_CHECKING:
     from cldet.evaluate import Evaluation
@@ -20,7 +20,11 @@ if TYPE_CHECKING:
 def export(
     logs: Annotated[
         list[Path],
-        typer.Argument(metavar="LOGS", help="Annotated MCAP logs, one per sequence (one split)."),
+        typer.Argument(
+            metavar="LOGS",
+            help="Annotated MCAP logs, one per sequence (one split); a folder stands for every"
+            " .mcap under it.",
+        ),
     ],
     out: Annotated[
         Path, typer.Option("--out", "-o", help="The results CSV to write (mmaud_results.csv).")
@@ -76,7 +80,7 @@ def export(
     limit_ns = None if math.isinf(max_extrapolation_s) else round(max_extrapolation_s * 1e9)
     with handled(), BarProgress() as bar:
         report = export_results(
-            logs,
+            expand_logs(logs),
             out,
             timestamps,
             class_id,

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from cldet.commands._app import app, echo_err, handled
+from cldet.commands._app import app, echo_err, expand_logs, handled
 
 
 @app.command()
@@ -16,7 +16,8 @@ def train(
         list[Path],
         typer.Argument(
             help="MCAP logs with /ground_truth (and /class for the drone type): `cldet convert`"
-            " of a train split, or your own labelled flights.",
+            " of a train split, or your own labelled flights; a folder stands for every .mcap"
+            " under it.",
             show_default=False,
         ),
     ],
@@ -69,6 +70,7 @@ def train(
     from cldet.train import train_logs
 
     with handled():
+        logs = expand_logs(logs)
         cfg = load_config(config)
         with BarProgress() as bar:
             report = train_logs(
