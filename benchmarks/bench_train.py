@@ -29,51 +29,16 @@ import platform
 import shutil
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
+
+from simdata import parse_seeds, simulated_logs  # benchmarks/simdata.py, beside this script
 
 from cldet.evaluate import evaluate_results, truth_from_logs
 from cldet.export import export_results
 from cldet.modelfile import load_model
 from cldet.pipeline import annotate_logs
-from cldet.simulate.dataset import simulate_sequence
-from cldet.simulate.randomized import write_world_sequence
 from cldet.train import train_logs
-from converters.mcap_convert import convert_dataset
-
-
-def _seeds(text: str) -> list[int]:
-    if text == "none":
-        return []
-    lo, _, hi = text.partition("-")
-    return list(range(int(lo), int(hi or lo) + 1))
-
-
-def _simulate(job: tuple[Path, int, float, bool]) -> int:
-    seq_dir, seed, duration, randomize = job
-    if not seq_dir.exists():  # simulated aside and renamed: an interrupted run leaves no half
-        partial = seq_dir.parent / f".{seq_dir.name}.partial"
-        shutil.rmtree(partial, ignore_errors=True)
-        if randomize:
-            write_world_sequence(partial, seed, duration, labels=True, images=False)
-        else:
-            simulate_sequence(partial, seed=seed, duration_s=duration, images=False)
-        partial.rename(seq_dir)
-    return seed
-
-
-def _dataset(
-    root: Path, seeds: list[int], duration: float, workers: int, randomize: bool = False
-) -> list[Path]:
-    """Simulate ``seeds`` under ``root/train/seq<seed>`` and convert them; the logs' paths."""
-    if not seeds:
-        return []
-    jobs = [(root / "train" / f"seq{seed}", seed, duration, randomize) for seed in seeds]
-    with ProcessPoolExecutor(workers) as pool:
-        list(pool.map(_simulate, jobs))
-    convert_dataset(root, root / "logs", splits=["train"], workers=workers, images=False)
-    return [root / "logs" / "train" / f"seq{seed}.mcap" for seed in seeds]
 
 
 def _score(
@@ -116,9 +81,13 @@ def main() -> None:
     work = args.work or Path(tempfile.mkdtemp(prefix="cldet-bench-train-"))
     work.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    train_seeds, test_seeds = _seeds(args.train_seeds), _seeds(args.test_seeds)
-    train = _dataset(work / "train", train_seeds, args.duration, args.workers, args.randomize)
-    test = _dataset(work / "test", test_seeds, args.duration, args.workers, args.randomize)
+    train_seeds, test_seeds = parse_seeds(args.train_seeds), parse_seeds(args.test_seeds)
+    train = simulated_logs(
+        work / "train", train_seeds, args.duration, args.workers, args.randomize
+    ).logs
+    test = simulated_logs(
+        work / "test", test_seeds, args.duration, args.workers, args.randomize
+    ).logs
     print(
         f"data: {len(train)} train / {len(test)} test logs of {args.duration:.0f} s"
         f" ({time.perf_counter() - t0:.0f} s to simulate and convert)"
