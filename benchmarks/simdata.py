@@ -50,15 +50,16 @@ def simulated_logs(
     root: Path, seeds: list[int], duration: float, workers: int, randomize: bool = False
 ) -> SimData:
     """Simulate ``seeds`` (labelled; the ``mixed`` scenario, or randomised worlds) under
-    ``root/data/train/seq<seed>`` and convert them to ``root/logs/train/seq<seed>.mcap``.
+    ``root/data/train/seq<seed>`` (at least 4 digits, as convert names it) and convert them to
+    ``root/logs/train/seq<seed>.mcap``.
 
     What an earlier run left complete under ``root`` is reused.
     """
     dataset = root / "data"
     if not seeds:
         return SimData(dataset, [])
-    jobs = [(dataset / "train" / f"seq{seed}", seed, duration, randomize) for seed in seeds]
+    jobs = [(dataset / "train" / f"seq{seed:04d}", seed, duration, randomize) for seed in seeds]
     with ProcessPoolExecutor(workers) as pool:
         list(pool.map(_simulate, jobs))
     convert_dataset(dataset, root / "logs", splits=["train"], workers=workers, images=False)
-    return SimData(dataset, [root / "logs" / "train" / f"seq{seed}.mcap" for seed in seeds])
+    return SimData(dataset, [root / "logs" / "train" / f"seq{seed:04d}.mcap" for seed in seeds])
