@@ -263,6 +263,18 @@ def _balanced_weights(labels: NDArray[np.int64], hits: NDArray[np.float64]) -> N
     return w
 
 
+def _measured(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``x`` with every column that is never measured (all NaN: e.g. the two LiDARs' ratio in
+    logs without an Avia) set to 0: the trees cannot bin an empty column, and a constant one
+    is simply never split on (at prediction a NaN there follows the trees' default branch)."""
+    empty = np.isnan(x).all(axis=0)
+    if not empty.any():
+        return x
+    x = x.copy()
+    x[:, empty] = 0.0
+    return x
+
+
 def fit_scorer(samples: Sequence[SequenceSample]) -> Any:
     """Gradient-boosted drone-vs-clutter trees over the labelled tracks of ``samples``."""
     from sklearn.ensemble import HistGradientBoostingClassifier
@@ -276,7 +288,7 @@ def fit_scorer(samples: Sequence[SequenceSample]) -> Any:
         raise TrainError("the candidate tracks are all drone or all clutter: nothing to tell apart")
     with one_thread():
         return HistGradientBoostingClassifier(**_TREE_PARAMS).fit(
-            x, y, sample_weight=_balanced_weights(y, h)
+            _measured(x), y, sample_weight=_balanced_weights(y, h)
         )
 
 
@@ -296,7 +308,7 @@ def fit_typer(samples: Sequence[SequenceSample], class_ids: list[int]) -> Any:
         raise TrainError("the drone tracks cover fewer than two classes: cannot learn the type")
     with one_thread():
         return HistGradientBoostingClassifier(**_TYPE_TREE_PARAMS).fit(
-            np.concatenate(xs)[:, TYPE_COLUMNS],
+            _measured(np.concatenate(xs)[:, TYPE_COLUMNS]),
             y,
             sample_weight=_balanced_weights(y, np.ones(len(y))),
         )

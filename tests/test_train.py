@@ -160,6 +160,8 @@ def test_type_classifier_votes_over_tracks_and_maps_class_ids() -> None:
             s.class_id = cls
             s.type_features = rng.normal(0.0, 0.05, (40, len(FEATURE_NAMES)))
             s.type_features[:, cross] += level
+            # a Mid-360 alone (no Avia): the two LiDARs' ratio is never measured
+            s.type_features[:, FEATURE_NAMES.index("log_mid_avia_med")] = np.nan
             samples.append(s)
     model = LearnedModel(0.05, 0.0, 0.0, typer=fit_typer(samples, [3, 7]), class_ids=[3, 7])
     small = np.zeros((2, len(FEATURE_NAMES)))

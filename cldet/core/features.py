@@ -50,6 +50,7 @@ FEATURE_NAMES: Final[tuple[str, ...]] = (
     "log_range_med",  # log10 of the range, m
     "both_fraction",  # detections seen by both LiDARs in one cluster
     "avia_only_fraction",
+    "log_mid_avia_med",  # log10(Mid-360 points / Avia points) where both saw it in one cluster
     "raw_fraction",  # detections from the raw-point gate
     "speed_med",  # filtered speed, m/s
     "speed_p90",
@@ -68,10 +69,14 @@ TYPE_FEATURES: Final[tuple[str, ...]] = (
     "size_z_p90_m",
     "size_xy_p90_m",
     "log_range_med",
+    "log_mid_avia_med",
 )
 """The features the drone-type classifier reads: what the airframe's size changes (the area
 that returned the points, seen from which side; the box the points span, and at what range the
-scan resolves it); not how it moves, which says more about the flight than about the airframe."""
+scan resolves it), and what its surface's reflectivity changes (the two LiDARs' detection ranges
+differ, about 40 m against 190 m on a dark target, so the Mid-360's share of the returns falls
+with range sooner on a dark airframe than on a white one); not how it moves, which says more
+about the flight than about the airframe."""
 TYPE_COLUMNS: Final = tuple(FEATURE_NAMES.index(n) for n in TYPE_FEATURES)
 
 _NIS95 = 7.81
@@ -148,6 +153,7 @@ def track_features(
     log_cross = np.log10(np.maximum(cross, 1e-6))
     rng = np.linalg.norm(pos, axis=1)
     n_mid, n_avia = det.n_mid360[:n], det.n_avia[:n]
+    both = (n_mid > 0) & (n_avia > 0) & cl
     speeds = rec.speed[:n][1:]
     nis = rec.nis[:n]
     nis = nis[np.isfinite(nis)]
@@ -184,8 +190,11 @@ def track_features(
             float(np.percentile(log_cross, 90)),
             float(np.median(np.log1p(rec.n_points[:n]))),
             float(np.median(np.log10(np.maximum(rng, 1e-3)))),
-            float(np.mean((n_mid > 0) & (n_avia > 0) & cl)),
+            float(np.mean(both)),
             float(np.mean((n_mid == 0) & (n_avia > 0) & cl)),
+            _nanmedian(
+                np.where(both, np.log10(np.maximum(n_mid, 1) / np.maximum(n_avia, 1)), np.nan)
+            ),
             float(np.mean(raw)),
             float(np.median(speeds)) if len(speeds) else float("nan"),
             float(np.percentile(speeds, 90)) if len(speeds) else float("nan"),
