@@ -17,7 +17,8 @@ estimator's per-frame verb with the configuration given and keeps its candidate 
   classes balanced; the refinement re-weighs the hand-set track factors by its probability
   (``cldet.core.selection.LEARNED_FLOOR``);
 - the **drone-type classifier** (when the logs carry ``/class`` with two classes or more): the
-  shape features (:data:`cldet.core.features.TYPE_FEATURES`) of the drone tracks' prefixes,
+  shape and return features (:data:`cldet.core.features.TYPE_FEATURES`) of the drone tracks'
+  prefixes,
   each labelled with its sequence's class, voted over the chosen chain's tracks at annotation
   time.
 
