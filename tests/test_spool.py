@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from contextlib import closing
+
 import numpy as np
 import pytest
 
@@ -13,7 +15,7 @@ def test_items_come_back_equal_in_any_order() -> None:
     items = [
         (k, rng.normal(size=(int(rng.integers(0, 50)), 3)).astype(np.float32)) for k in range(40)
     ]
-    with Spool[tuple[int, np.ndarray]]() as spool:
+    with closing(Spool[tuple[int, np.ndarray]]()) as spool:
         for item in items:
             spool.append(item)
         assert len(spool) == len(items)
@@ -26,7 +28,7 @@ def test_items_come_back_equal_in_any_order() -> None:
 
 
 def test_out_of_range_is_an_index_error() -> None:
-    with Spool[int]() as spool:
+    with closing(Spool[int]()) as spool:
         spool.append(1)
         with pytest.raises(IndexError, match="out of range"):
             spool[1]

@@ -14,7 +14,6 @@ from __future__ import annotations
 import pickle
 import tempfile
 from collections.abc import Iterator, Sequence
-from types import TracebackType
 from typing import TypeVar, overload
 
 from cldet.errors import CldetError
@@ -25,7 +24,8 @@ T = TypeVar("T")
 
 
 class Spool(Sequence[T]):
-    """An append-only sequence whose items live in a temporary file (a context manager).
+    """An append-only sequence whose items live in a temporary file; :meth:`close` deletes it
+    (``contextlib.closing`` for a block).
 
     Args:
         folder: where the temporary file goes (default: the system's temporary folder).
@@ -77,14 +77,3 @@ class Spool(Sequence[T]):
     def close(self) -> None:
         """Delete the file (the items are gone)."""
         self._file.close()
-
-    def __enter__(self) -> Spool[T]:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
