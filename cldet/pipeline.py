@@ -38,7 +38,7 @@ from cldet.core.trajectory import rms, trajectory_errors
 from cldet.errors import CldetError, FrameOrderError
 from cldet.executors import iter_outcomes
 from cldet.io import topics
-from cldet.io.files import check_output, lock_file
+from cldet.io.files import check_output, file_size, lock_file
 from cldet.io.mcap_append import is_replaced_channel
 from cldet.io.mcap_read import LogReader, open_log
 from cldet.io.mcap_write import LogWriter
@@ -439,14 +439,6 @@ def annotate_log_locked(
         )
 
 
-def _size(path: Path) -> int:
-    """A file's size in bytes (0 when it cannot be read: its job reports why)."""
-    try:
-        return path.stat().st_size
-    except OSError:
-        return 0
-
-
 @dataclass(frozen=True)
 class _AnnotateJob:
     """One log of :func:`annotate_logs`, as a worker receives it."""
@@ -548,7 +540,7 @@ def annotate_logs(
         executor=executor,
         ray_address=ray_address,
         progress=progress,
-        costs=[_size(job.log) for job in jobs],  # the longest logs first
+        costs=[file_size(job.log) for job in jobs],  # the longest logs first
     )
     with closing(outcomes):
         for outcome in outcomes:

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -46,8 +47,9 @@ from cldet.core.model import LearnedModel, one_thread
 from cldet.core.trajectory import evaluate_trajectory
 from cldet.errors import CldetError, OutputExistsError
 from cldet.evaluate import confusion_text
+from cldet.executors import iter_outcomes
 from cldet.io import topics
-from cldet.io.files import check_output
+from cldet.io.files import check_output, file_size
 from cldet.io.mcap_read import open_log
 from cldet.io.sources import iter_log_positions, select_topics
 from cldet.modelfile import write_model
@@ -465,6 +467,44 @@ class TrainReport:
         return "\n".join(lines)
 
 
+def _collect_job(job: tuple[Path, CldetConfig], progress: Progress) -> SequenceSample:
+    """:func:`collect_sequence` on one log (runs in a worker process or a Ray task)."""
+    log, config = job
+    return collect_sequence(log, config)
+
+
+def _collect_all(
+    logs: list[Path],
+    config: CldetConfig,
+    make: Callable[[], Progress],
+    workers: int | None,
+    executor: str,
+    ray_address: str | None,
+) -> list[SequenceSample]:
+    """Every log's sample, in the order given; in this process (per-frame progress) or in
+    parallel (per-log progress). An error of one log is raised, as in one process."""
+    if executor == "local" and (workers is not None and workers <= 1 or len(logs) == 1):
+        return [collect_sequence(log, config, progress=make()) for log in logs]
+    progress = make()
+    progress.start(len(logs), "training passes")
+    samples: dict[int, SequenceSample] = {}
+    outcomes = iter_outcomes(
+        _collect_job,
+        [(log, config) for log in logs],
+        workers=workers,
+        executor=executor,
+        ray_address=ray_address,
+        costs=[file_size(log) for log in logs],  # the longest logs first
+    )
+    with closing(outcomes):
+        for outcome in outcomes:
+            if outcome.result is None:
+                outcome.raise_error()
+            samples[outcome.index] = outcome.result
+            progress.advance()
+    return [samples[i] for i in range(len(logs))]
+
+
 def train_logs(
     logs: Sequence[Path],
     out: Path,
@@ -474,8 +514,14 @@ def train_logs(
     overwrite: bool = False,
     progress_factory: Callable[[], Progress] | None = None,
     warn: Callable[[str], None] = lambda _: None,
+    workers: int | None = 1,
+    executor: str = "local",
+    ray_address: str | None = None,
 ) -> TrainReport:
     """Learn a model from labelled ``logs`` and write it to ``out`` (atomically).
+
+    The logs' passes (most of the work) run in ``workers`` processes, or as Ray tasks with
+    ``executor="ray"`` (see :mod:`cldet.executors`); the model is the same either way.
 
     Raises:
         TrainError: no logs, no truth, too few detections, one class of tracks only.
@@ -494,9 +540,9 @@ def train_logs(
     if Path(out).exists() and not overwrite:
         raise OutputExistsError(f"{out} already exists: pass overwrite (--overwrite) to replace it")
     make = progress_factory or NullProgress
-    samples = []
-    for log in logs:
-        samples.append(collect_sequence(Path(log), config, progress=make()))
+    samples = _collect_all(
+        [Path(log) for log in logs], config, make, workers, executor, ray_address
+    )
     for s in samples:
         if not (s.labels == 1).any():
             warn(

@@ -289,3 +289,22 @@ def test_existing_output_refused_before_any_work(train_logs_: list[Path], tmp_pa
     with pytest.raises(OutputExistsError, match="already exists"):
         train_logs(train_logs_, out)
     assert out.read_bytes() == b"keep me"
+
+
+def test_training_in_parallel_learns_the_same_model(
+    train_logs_: list[Path], trained: tuple[Path, str], tmp_path: Path
+) -> None:
+    """The logs' passes in two worker processes: the same samples, so the same model."""
+    out = tmp_path / "parallel.zip"
+    report = train_logs(train_logs_, out, workers=2, cross_validation=False)
+    alone = load_model(trained[0])
+    together = load_model(out)
+    assert report.model.scan_offset_s == alone.scan_offset_s == together.scan_offset_s
+    assert (together.bias_along_ray_m, together.bias_z_m) == (
+        alone.bias_along_ray_m,
+        alone.bias_z_m,
+    )
+    assert together.class_ids == alone.class_ids
+    rng = np.random.default_rng(1)
+    feats = rng.normal(0.0, 1.0, (20, len(FEATURE_NAMES)))
+    np.testing.assert_array_equal(together.drone_probability(feats), alone.drone_probability(feats))

@@ -2,12 +2,22 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from cldet.commands._app import app, echo_err, expand_logs, handled
+from cldet.commands._app import (
+    EXECUTOR_HELP,
+    RAY_ADDRESS_HELP,
+    ExecutorChoice,
+    app,
+    check_executor,
+    echo_err,
+    expand_logs,
+    handled,
+)
 
 
 @app.command()
@@ -38,6 +48,19 @@ def train(
         ),
     ] = True,
     overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
+    workers: Annotated[
+        int,
+        typer.Option(
+            help="Logs run through the estimator in parallel, the bulk of the work (default: all"
+            " cores; with --executor ray: all of the Ray cluster's). The model is the same."
+        ),
+    ] = 0,
+    executor: Annotated[
+        ExecutorChoice, typer.Option("--executor", help=EXECUTOR_HELP)
+    ] = ExecutorChoice.local,
+    ray_address: Annotated[
+        str | None, typer.Option("--ray-address", metavar="ADDR", help=RAY_ADDRESS_HELP)
+    ] = None,
 ) -> None:
     """Learn from labelled logs what the default estimator only assumes, and write a model.
 
@@ -71,6 +94,8 @@ def train(
 
     with handled():
         logs = expand_logs(logs)
+        check_executor(executor, ray_address)
+        on_ray = executor is ExecutorChoice.ray
         cfg = load_config(config)
         with BarProgress() as bar:
             report = train_logs(
@@ -81,6 +106,9 @@ def train(
                 overwrite=overwrite,
                 progress_factory=lambda: bar,
                 warn=lambda m: echo_err(f"WARNING: {m}"),
+                workers=workers or (None if on_ray else os.cpu_count() or 1),
+                executor=executor.value,
+                ray_address=ray_address,
             )
     typer.echo(report.describe())
     typer.echo(f"wrote {out}: use it with `cldet annotate LOGS --model {out}`")

@@ -124,6 +124,14 @@ def remove_stale_temporaries(folder: Path) -> list[Path]:
     return removed
 
 
+def file_size(path: str | os.PathLike[str]) -> int:
+    """A file's size in bytes, 0 when it cannot be read (whoever opens it says why)."""
+    try:
+        return os.stat(path).st_size
+    except OSError:
+        return 0
+
+
 def _umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)
