@@ -51,6 +51,14 @@ RAY_ADDRESS_HELP = (
 )
 
 
+ExecutorOption = Annotated[ExecutorChoice, typer.Option("--executor", help=EXECUTOR_HELP)]
+"""``--executor``, as convert, annotate and train take it (default ``ExecutorChoice.local``)."""
+RayAddressOption = Annotated[
+    str | None, typer.Option("--ray-address", metavar="ADDR", help=RAY_ADDRESS_HELP)
+]
+"""``--ray-address ADDR`` (default None)."""
+
+
 def check_executor(executor: ExecutorChoice, ray_address: str | None) -> None:
     """``--ray-address`` goes with ``--executor ray``."""
     if ray_address is not None and executor is not ExecutorChoice.ray:

@@ -10,9 +10,9 @@ from typing import Annotated
 import typer
 
 from cldet.commands._app import (
-    EXECUTOR_HELP,
-    RAY_ADDRESS_HELP,
     ExecutorChoice,
+    ExecutorOption,
+    RayAddressOption,
     app,
     check_executor,
     echo_err,
@@ -74,12 +74,8 @@ def annotate(
             "the Ray cluster's)."
         ),
     ] = 0,
-    executor: Annotated[
-        ExecutorChoice, typer.Option("--executor", help=EXECUTOR_HELP)
-    ] = ExecutorChoice.local,
-    ray_address: Annotated[
-        str | None, typer.Option("--ray-address", metavar="ADDR", help=RAY_ADDRESS_HELP)
-    ] = None,
+    executor: ExecutorOption = ExecutorChoice.local,
+    ray_address: RayAddressOption = None,
     force: Annotated[
         bool,
         typer.Option(

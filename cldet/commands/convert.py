@@ -10,9 +10,9 @@ from typing import Annotated
 import typer
 
 from cldet.commands._app import (
-    EXECUTOR_HELP,
-    RAY_ADDRESS_HELP,
     ExecutorChoice,
+    ExecutorOption,
+    RayAddressOption,
     app,
     check_executor,
     echo_err,
@@ -107,12 +107,8 @@ def convert(
             "ray: of the Ray cluster).",
         ),
     ] = None,
-    executor: Annotated[
-        ExecutorChoice, typer.Option("--executor", help=EXECUTOR_HELP)
-    ] = ExecutorChoice.local,
-    ray_address: Annotated[
-        str | None, typer.Option("--ray-address", metavar="ADDR", help=RAY_ADDRESS_HELP)
-    ] = None,
+    executor: ExecutorOption = ExecutorChoice.local,
+    ray_address: RayAddressOption = None,
     compression: Annotated[
         CompressionChoice,
         typer.Option(

@@ -9,9 +9,9 @@ from typing import Annotated
 import typer
 
 from cldet.commands._app import (
-    EXECUTOR_HELP,
-    RAY_ADDRESS_HELP,
     ExecutorChoice,
+    ExecutorOption,
+    RayAddressOption,
     app,
     check_executor,
     echo_err,
@@ -55,12 +55,8 @@ def train(
             " cores; with --executor ray: all of the Ray cluster's). The model is the same."
         ),
     ] = 0,
-    executor: Annotated[
-        ExecutorChoice, typer.Option("--executor", help=EXECUTOR_HELP)
-    ] = ExecutorChoice.local,
-    ray_address: Annotated[
-        str | None, typer.Option("--ray-address", metavar="ADDR", help=RAY_ADDRESS_HELP)
-    ] = None,
+    executor: ExecutorOption = ExecutorChoice.local,
+    ray_address: RayAddressOption = None,
 ) -> None:
     """Learn from labelled logs what the default estimator only assumes, and write a model.
 
