@@ -31,7 +31,7 @@ from cldet.errors import CldetError
 from cldet.io import topics
 from cldet.io.mcap_write import LogWriter
 from cldet.io.transforms import log_tree
-from cldet.result_channels import causal_additions, track_writer
+from cldet.result_channels import causal_additions, track_writer, truth_track_writer
 from cldet.stamps import NS_PER_S
 from cldet.types import LidarFrame
 
@@ -138,9 +138,7 @@ class FoxgloveView:
     ) -> None:
         """The ground truth's trajectory, at the last frame's stamp."""
         if len(positions) and self._last_ns is not None:
-            self._writer.write_colored_cloud(
-                topics.TRUTH_TRACK, self._last_ns, positions, (255, 255, 255, 255), self._frame
-            )
+            truth_track_writer(self._last_ns, positions, self._frame)(self._writer)
 
     def close(self) -> Path | None:
         """Close this log's channels (the server stays up for the next log)."""

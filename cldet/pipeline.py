@@ -143,17 +143,16 @@ def read_frames(
             if truth is not None and sensors.truth
             else iter(())
         )
+        sink = truth if truth is not None else []  # empty when no truth is asked for
         pending = next(positions, None)
         for frame in pair_frames(lidar(), avia(sensors.avia) if sensors.avia else iter(())):
             yield frame
             while pending is not None and pending.stamp_ns <= frame.stamp_ns:
-                assert truth is not None
-                truth.append(pending)
+                sink.append(pending)
                 pending = next(positions, None)
         if pending is not None:
-            assert truth is not None
-            truth.append(pending)
-            truth.extend(positions)
+            sink.append(pending)
+            sink.extend(positions)
 
 
 def annotate_log(

@@ -13,23 +13,16 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from cldet.colours import CHOSEN_RGBA, SOURCE_RGBA, TRACK_RGBA
 from cldet.core.estimator import FrameDetections, SequenceEstimate
 from cldet.io import topics
 from cldet.io.mcap_write import LogWriter
 from cldet.io.rewrite import Addition
-from cldet.types import ClassEstimate, Estimate, Source
+from cldet.types import ClassEstimate, Estimate
 
-__all__ = ["causal_additions", "result_additions", "track_writer"]
+__all__ = ["causal_additions", "result_additions", "track_writer", "truth_track_writer"]
 
-_SOURCE_RGBA: dict[Source, tuple[int, int, int, int]] = {
-    Source.DETECTED: (40, 220, 60, 255),
-    Source.PREDICTED: (255, 170, 0, 255),
-    Source.SMOOTHED: (80, 200, 255, 255),
-    Source.FALLBACK: (255, 40, 40, 255),
-}
-_TRACK_RGBA = (255, 60, 200, 255)
 _TRUTH_RGBA = (255, 255, 255, 255)
-_CHOSEN_RGBA = (40, 220, 60, 255)
 _CLUSTER_RGBA = (255, 150, 0, 255)
 
 
@@ -75,14 +68,7 @@ def result_additions(
         additions.append((first, track_writer(first, positions, frame_id)))
         if truth is not None and len(truth):
             truth_xyz = np.asarray(truth, dtype=np.float64)
-            additions.append(
-                (
-                    first,
-                    lambda w: w.write_colored_cloud(
-                        topics.TRUTH_TRACK, first, truth_xyz, _TRUTH_RGBA, frame_id
-                    ),
-                )
-            )
+            additions.append((first, truth_track_writer(first, truth_xyz, frame_id)))
     for i, det in enumerate(detections):
         # the writer reads its frame again when called: ``detections`` may live on disk
         chosen_id = result.chosen.get(det.stamp_ns)
@@ -95,7 +81,16 @@ def track_writer(stamp_ns: int, positions: NDArray[np.float64], frame_id: str) -
 
     def write(writer: LogWriter) -> None:
         writer.write_poses(topics.TRAJECTORY, stamp_ns, positions, frame_id)
-        writer.write_colored_cloud(topics.TRACK, stamp_ns, positions, _TRACK_RGBA, frame_id)
+        writer.write_colored_cloud(topics.TRACK, stamp_ns, positions, TRACK_RGBA, frame_id)
+
+    return write
+
+
+def truth_track_writer(stamp_ns: int, positions: NDArray[np.float64], frame_id: str) -> Addition:
+    """Writes the ground truth's trajectory once: ``/cldet/truth_track`` (a white cloud)."""
+
+    def write(writer: LogWriter) -> None:
+        writer.write_colored_cloud(topics.TRUTH_TRACK, stamp_ns, positions, _TRUTH_RGBA, frame_id)
 
     return write
 
@@ -105,7 +100,7 @@ def _estimate_writer(est: Estimate, frame_id: str) -> Addition:
         writer.write_estimate(topics.ESTIMATE, est.stamp_ns, est)
         writer.write_pose(topics.POSE, est.stamp_ns, est.position, frame_id)
         writer.write_colored_cloud(
-            topics.DRONE, est.stamp_ns, est.position[None, :], _SOURCE_RGBA[est.source], frame_id
+            topics.DRONE, est.stamp_ns, est.position[None, :], SOURCE_RGBA[est.source], frame_id
         )
 
     return write
@@ -132,7 +127,7 @@ def causal_additions(det: FrameDetections, frame_id: str) -> list[tuple[int, Add
                 topics.DRONE,
                 est.stamp_ns,
                 est.position[None, :],
-                _SOURCE_RGBA[est.source],
+                SOURCE_RGBA[est.source],
                 frame_id,
             )
 
@@ -170,7 +165,7 @@ def _clusters_writer(det: FrameDetections, chosen_id: int | None, frame_id: str)
         writer.write_scene_update(topics.CLUSTERS, det.stamp_ns, others, frame_id)
         chosen = [c for c in det.clusters if c.cluster_id == chosen_id]
         centres = np.array([c.centroid for c in others + chosen], dtype=np.float64).reshape(-1, 3)
-        colours = np.array([_CLUSTER_RGBA] * len(others) + [_CHOSEN_RGBA] * len(chosen), np.uint8)
+        colours = np.array([_CLUSTER_RGBA] * len(others) + [CHOSEN_RGBA] * len(chosen), np.uint8)
         writer.write_colored_cloud(
             topics.CENTROIDS, det.stamp_ns, centres, colours.reshape(-1, 4), frame_id
         )

@@ -38,9 +38,10 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from cldet.colours import CHOSEN_RGBA, SOURCE_RGBA, TRACK_RGBA
 from cldet.config import SensorConfig
 from cldet.io.files import atomic_path
-from cldet.types import Cluster, Estimate, LidarFrame, Source
+from cldet.types import Cluster, Estimate, LidarFrame
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -52,21 +53,13 @@ TIMELINE = "timestamp"
 DEFAULT_GRPC_URL = "rerun+http://127.0.0.1:9876/proxy"
 _FLUSH_EVERY = 64  # frames buffered before a send_columns batch
 
-# Colours (RGBA): sources of estimates, and fixed layers.
-_SOURCE_COLOURS = {
-    Source.DETECTED: (40, 220, 60, 255),
-    Source.PREDICTED: (255, 170, 0, 255),
-    Source.SMOOTHED: (80, 200, 255, 255),
-    Source.FALLBACK: (255, 40, 40, 255),
-}
+# Colours (RGBA) of fixed layers; those of estimates, track and chosen cluster: cldet.colours.
 _MID360_COLOUR = (150, 150, 150, 255)
 _AVIA_COLOUR = (90, 140, 255, 255)
 _NOISE_COLOUR = (120, 120, 120, 255)
 _TRUTH_COLOUR = (255, 225, 0, 255)
 _ERROR_COLOUR = (255, 60, 60, 255)
-_TRACK_COLOUR = (255, 60, 200, 255)
 _CLUSTER_COLOUR = (200, 200, 60, 255)
-_CHOSEN_COLOUR = (40, 220, 60, 255)
 _N_CLUSTER_COLOURS = 12
 NOISE_CLASS = 255  # class id of noise points (grey, no label)
 MIN_BOX_HALF_M = 0.1  # boxes are at least 0.2 m a side: a one-point cluster stays visible
@@ -398,7 +391,7 @@ class RerunView:
 
         stamps = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
         positions = np.array([e.position for e in estimates], dtype=np.float64)
-        colours = np.array([_SOURCE_COLOURS[e.source] for e in estimates], dtype=np.uint8)
+        colours = np.array([SOURCE_RGBA[e.source] for e in estimates], dtype=np.uint8)
         labels = [
             f"drone: {e.source.name.lower()}"
             + (f", {_points(e.n_points)}" if e.n_points else "")
@@ -430,7 +423,7 @@ class RerunView:
             self._track = positions
             rec.log(
                 "world/drone/trajectory",
-                rr.LineStrips3D([positions], colors=[_TRACK_COLOUR], radii=[0.04]),
+                rr.LineStrips3D([positions], colors=[TRACK_RGBA], radii=[0.04]),
                 static=True,
             )
         chosen: list[tuple[int, Cluster]] = []
@@ -451,7 +444,7 @@ class RerunView:
                     centers=np.array([c.centroid for _, c in chosen]),
                     half_sizes=np.array([min_half_sizes(c.lower, c.upper) for _, c in chosen])
                     + 0.05,
-                    colors=np.tile(np.array(_CHOSEN_COLOUR, np.uint8), (len(chosen), 1)),
+                    colors=np.tile(np.array(CHOSEN_RGBA, np.uint8), (len(chosen), 1)),
                 ),
             )
         if result.events:
