@@ -323,7 +323,27 @@ class SmoothingConfig(BaseModel):
     extrapolation_tau_s: float = Field(
         default=1.5,
         gt=0,
-        description="beyond the detections the velocity decays with this time constant",
+        description="beyond the detections the velocity decays with this time constant (after"
+        " holding as long as the straight run that ends, or starts, the track)",
+    )
+    straight_rms_m: float = Field(
+        default=0.4,
+        ge=0,
+        description="a run of detections is straight when a constant velocity fits it to this"
+        " RMS residual, metres, plus the smear of a scan at the run's speed (0: never). Inertia:"
+        " beyond a straight run the extrapolation keeps the run's velocity for as long as the"
+        " run lasted, then decays",
+    )
+    straight_min_speed_mps: float = Field(
+        default=3.0,
+        ge=0,
+        description="a straight run slower than this is a hover's drift or a manoeuvre, not a"
+        " transit: its velocity is not held",
+    )
+    straight_max_hold_s: float = Field(
+        default=10.0,
+        ge=0,
+        description="the longest a straight run's velocity is held beyond the detections, s",
     )
 
 

@@ -53,7 +53,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from cldet.config import CldetConfig, TrackingConfig
+from cldet.config import CldetConfig, SmoothingConfig, TrackingConfig
 from cldet.core.background import FOREGROUND, MARGIN, BackgroundModel
 from cldet.core.bias import apply_bias
 from cldet.core.clustering import cluster_points, summarize_clusters
@@ -69,7 +69,7 @@ from cldet.core.selection import (
     score_tracks,
     select_chain,
 )
-from cldet.core.smoothing import extrapolate, rts_smooth
+from cldet.core.smoothing import extrapolate, rts_smooth, straight_run
 from cldet.core.tracking import (
     ActiveTracks,
     CandidateTracker,
@@ -593,17 +593,15 @@ def refine_candidates(
     # the smoother's states are at the points' time: move them back to the stamps
     pos[seg] = sm.position - sm.velocity * offset_s
     var[seg] = sm.pos_var
-    q = cfg.smoothing.accel_psd
+    q, tau_s = cfg.smoothing.accel_psd, cfg.smoothing.extrapolation_tau_s
+    scan_s = float(np.median(np.diff(t_s))) if n > 1 else 0.0  # a scan lasts a frame period
+    ends = _extrapolation_ends(t_s[idx], z[idx], sm.velocity, scan_s, cfg.smoothing)
     for f in list(range(first)) + list(range(last + 1, n)):
         k_end = 0 if f < first else -1
+        velocity, hold_s = ends[k_end]
         dt = t_s[f] - t_s[first if f < first else last] - offset_s
         pos[f], var[f] = extrapolate(
-            sm.position[k_end],
-            sm.velocity[k_end],
-            sm.cov[k_end],
-            dt,
-            q,
-            cfg.smoothing.extrapolation_tau_s,
+            sm.position[k_end], velocity, sm.cov[k_end], dt, q, tau_s, hold_s
         )
     pos = apply_bias(pos, cfg.bias)
 
@@ -628,6 +626,33 @@ def refine_candidates(
     events.sort(key=lambda e: e.stamp_ns)
     classes = () if model is None else _classify(model, chain, cand, tc)
     return SequenceEstimate(tuple(estimates), chosen, tuple(events), classes=classes)
+
+
+def _extrapolation_ends(
+    t: NDArray[np.float64],
+    z: NDArray[np.float64],
+    velocity: NDArray[np.float64],
+    scan_s: float,
+    cfg: SmoothingConfig,
+) -> dict[int, tuple[NDArray[np.float64], float]]:
+    """The velocity beyond the start (key 0) and the end (key -1) of the detections ``z`` at
+    times ``t``, and how long it holds before it decays: the smoother's, not held; but where the
+    detections ending (starting) the track run straight for longer than
+    ``extrapolation_tau_s`` at ``straight_min_speed_mps`` or more (a transit, not a hover), the
+    run's own velocity, held as long as the run lasted (at most ``straight_max_hold_s``). ``scan_s``: how long a scan collects its points (the smear a fast
+    drone leaves)."""
+    ends = {0: (velocity[0], 0.0), -1: (velocity[-1], 0.0)}
+    if cfg.straight_rms_m <= 0:
+        return ends
+    for key, (tt, zz, sign) in {0: (-t[::-1], z[::-1], -1.0), -1: (t, z, 1.0)}.items():
+        run = straight_run(tt, zz, cfg.straight_rms_m, scan_s)
+        if (
+            run is not None
+            and run.duration_s > cfg.extrapolation_tau_s
+            and float(np.linalg.norm(run.velocity)) >= cfg.straight_min_speed_mps
+        ):
+            ends[key] = (sign * run.velocity, min(run.duration_s, cfg.straight_max_hold_s))
+    return ends
 
 
 CLASS_EVERY_S = 1.0

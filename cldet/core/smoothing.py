@@ -22,6 +22,7 @@ __all__ = [
     "extrapolate",
     "process_noise",
     "rts_smooth",
+    "straight_run",
     "transition",
 ]
 
@@ -165,17 +166,76 @@ def extrapolate(
     dt: float,
     q: float,
     tau_s: float,
+    hold_s: float = 0.0,
 ) -> tuple[NDArray[np.float64], float]:
     """Position and per-axis variance ``dt`` seconds (either sign) from an end of the track.
 
-    The velocity decays with time constant ``tau_s``: the displacement is
-    v * tau * (1 - exp(-|dt| / tau)), which saturates at v * tau, instead of growing without
-    bound. The variance is the constant-velocity one (cov propagated over the effective time,
-    plus the white-acceleration noise over |dt|).
+    The velocity holds for ``hold_s`` seconds, then decays with time constant ``tau_s``: the
+    displacement is v * (h + tau * (1 - exp(-(|dt| - h) / tau))) with h = min(|dt|, hold_s),
+    which saturates at v * (hold_s + tau) instead of growing without bound. The variance is
+    the constant-velocity one (cov propagated over the effective time, plus the
+    white-acceleration noise over |dt|).
     """
     a = abs(dt)
-    eff = tau_s * (1.0 - np.exp(-a / tau_s)) * np.sign(dt)
+    held = min(a, hold_s)
+    eff = (held + tau_s * (1.0 - np.exp(-(a - held) / tau_s))) * np.sign(dt)
     F = transition(float(eff))
     p = np.asarray(position, dtype=np.float64) + np.asarray(velocity, dtype=np.float64) * eff
     var = float((F @ np.asarray(cov) @ F.T + process_noise(a, q))[0, 0])
     return p, var
+
+
+@dataclass(frozen=True)
+class StraightRun:
+    """The longest run of detections, ending at the track's last one, that a constant velocity
+    explains (see :func:`straight_run`)."""
+
+    duration_s: float  # from the run's first detection to its last, s
+    velocity: NDArray[np.float64]  # (3,) the constant velocity fitted to the run, m/s
+    n: int  # detections in the run
+
+
+def straight_run(
+    t: NDArray[np.float64],
+    z: NDArray[np.float64],
+    max_rms_m: float,
+    scan_s: float = 0.0,
+    min_points: int = 4,
+) -> StraightRun | None:
+    """The longest suffix of detections ``z`` (H,3) at times ``t`` (H,), increasing, whose
+    least-squares constant-velocity fit leaves an RMS residual (3D, per detection) of at most
+    ``max_rms_m`` plus the smear of a scan: a scan collects its points over ``scan_s`` seconds,
+    so at speed v a detection's points spread over v * scan_s along the path (RMS v * scan_s /
+    sqrt(12) about their mean); None when no suffix of ``min_points`` or more qualifies.
+
+    What inertia says about the time beyond the track: a drone seen flying straight at a steady
+    speed for T seconds is likely still doing so for about as long after it was last seen,
+    where one seen turning or stopping is not. O(H): every suffix's fit comes from cumulative
+    sums. For the run *starting* the track, pass the detections reversed in time (``-t[::-1]``,
+    ``z[::-1]``) and negate the velocity.
+    """
+    n_all = len(t)
+    if n_all < min_points:
+        return None
+    # suffix sums, the last detection first; times relative to it, positions to its position
+    tr = (t - t[-1])[::-1]
+    zr = (z - z[-1])[::-1]
+    n = np.arange(1, n_all + 1, dtype=np.float64)
+    s_t = np.cumsum(tr)
+    s_tt = np.cumsum(tr * tr)
+    s_z = np.cumsum(zr, axis=0)
+    s_tz = np.cumsum(tr[:, None] * zr, axis=0)
+    s_zz = np.cumsum(np.einsum("ij,ij->i", zr, zr))
+    var_t = s_tt - s_t * s_t / n  # sum of (t - mean)^2
+    cov_tz = s_tz - s_t[:, None] * s_z / n[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sse = s_zz - np.einsum("ij,ij->i", s_z, s_z) / n
+        sse -= np.where(var_t > 0, np.einsum("ij,ij->i", cov_tz, cov_tz) / var_t, 0.0)
+        velocity = cov_tz / var_t[:, None]
+    rms = np.sqrt(np.maximum(sse, 0.0) / n)
+    smear = np.linalg.norm(velocity, axis=1) * (scan_s / np.sqrt(12.0))
+    ok = np.flatnonzero((var_t > 0) & (n >= min_points) & (rms <= max_rms_m + smear))
+    if not len(ok):
+        return None
+    k = int(ok[-1])
+    return StraightRun(duration_s=float(-tr[k]), velocity=velocity[k], n=k + 1)

@@ -439,3 +439,28 @@ def test_the_causal_estimate_waits_for_confirmation() -> None:
 
     assert worst(3.0) < 1.0
     assert worst(0.0) > 5.0  # the rule is needed here
+
+
+def test_a_straight_pass_seen_only_midway_is_extrapolated_along_its_line() -> None:
+    # a drone crossing at 15 m/s, 15-27 m out, returns points only in scans 25-55 of 80 (out
+    # of range or hidden before and after); it flew straight while seen, so inertia carries it
+    # on along that line for about as long, where a decaying velocity stops it short
+    def drone(k: int) -> np.ndarray:
+        return np.array([15.0, -60.0 + 1.5 * k, 4.0])
+
+    frames = _with_objects(0, 80, lambda k: [(tuple(drone(k)), 0.25)] if 25 <= k <= 55 else [])
+    truth = np.array([drone(k) for k in range(80)])
+
+    def rms(straight_rms_m: float) -> float:
+        cfg = load_config(
+            overrides={
+                "smoothing": {"straight_rms_m": straight_rms_m},
+                "frames": {"scan_offset_s": 0.0},  # the test scene's scans are instantaneous
+            }
+        )
+        _, result = estimate_sequence(frames, cfg)
+        assert sum(e.source == Source.DETECTED for e in result.estimates) >= 25
+        return _rms(np.array([e.position for e in result.estimates]) - truth)
+
+    assert rms(0.4) < 1.0
+    assert rms(0.0) > 3.0  # the rule is needed here (about 5 m without it)

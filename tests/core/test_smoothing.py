@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cldet.core.smoothing import KalmanCV, extrapolate, rts_smooth
+from cldet.core.smoothing import KalmanCV, extrapolate, rts_smooth, straight_run
 
 
 def _trajectory(t: np.ndarray) -> np.ndarray:
@@ -73,3 +73,45 @@ def test_extrapolation_decays_the_velocity() -> None:
     assert far[0] == pytest.approx(3.0, rel=1e-3)  # saturates at v * tau
     assert back[0] == pytest.approx(-3.0, rel=1e-3)
     assert var_far > var_near
+
+
+def test_extrapolation_holds_the_velocity_then_decays() -> None:
+    p, v, cov = np.zeros(3), np.array([10.0, 0.0, 0.0]), np.diag([0.01, 0.1])
+    held, _ = extrapolate(p, v, cov, 2.0, q=1.0, tau_s=1.5, hold_s=3.0)
+    back, _ = extrapolate(p, v, cov, -2.0, q=1.0, tau_s=1.5, hold_s=3.0)
+    far, _ = extrapolate(p, v, cov, 60.0, q=1.0, tau_s=1.5, hold_s=3.0)
+    assert held[0] == pytest.approx(20.0)  # constant velocity while held
+    assert back[0] == pytest.approx(-20.0)
+    assert far[0] == pytest.approx(10.0 * (3.0 + 1.5), rel=1e-3)  # then decays to v*(hold+tau)
+
+
+def test_straight_run_starts_where_the_flight_turned() -> None:
+    # 2 s of a tight turn, then 4 s straight at 12 m/s, detections every 0.1 s with 0.15 m noise
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 6.0, 0.1)
+    turn = np.stack([3 * np.sin(2 * t), 3 * np.cos(2 * t) - 3, 0 * t], axis=1)
+    exit_p, exit_v = turn[19], np.array([6 * np.cos(2 * t[19]), -6 * np.sin(2 * t[19]), 0.0])
+    direction = exit_v / np.linalg.norm(exit_v)
+    straight = exit_p + np.outer(t - t[19], 12.0 * direction)
+    z = np.where((t < t[19] + 1e-9)[:, None], turn, straight) + rng.normal(0, 0.15, (len(t), 3))
+    run = straight_run(t, z, max_rms_m=0.4)
+    assert run is not None
+    assert run.duration_s == pytest.approx(t[-1] - t[19], abs=0.35)  # begins at the turn
+    np.testing.assert_allclose(run.velocity, 12.0 * direction, atol=0.3)
+    # a random walk of the same scale is never straight for long
+    walk = np.cumsum(rng.normal(0, 1.0, (len(t), 3)), axis=0)
+    walk_run = straight_run(t, walk, max_rms_m=0.4)
+    assert walk_run is None or walk_run.duration_s < 1.0
+
+
+def test_straight_run_allows_for_the_smear_of_a_scan() -> None:
+    # at 20 m/s a 0.1 s scan spreads a detection's points over 2 m: centroids scatter ~0.6 m
+    # along the path; straight only once the scan's smear is allowed for
+    rng = np.random.default_rng(1)
+    t = np.arange(0.0, 3.0, 0.1)
+    v = np.array([20.0, 0.0, 0.0])
+    z = np.outer(t, v) + np.outer(rng.uniform(-1.0, 1.0, len(t)), v / 20.0)
+    no_smear = straight_run(t, z, max_rms_m=0.3)
+    assert no_smear is None or no_smear.duration_s < 1.0
+    run = straight_run(t, z, max_rms_m=0.3, scan_s=0.1)
+    assert run is not None and run.duration_s == pytest.approx(t[-1])
