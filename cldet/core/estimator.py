@@ -639,8 +639,8 @@ def _extrapolation_ends(
     times ``t``, and how long it holds before it decays: the smoother's, not held; but where the
     detections ending (starting) the track run straight for longer than
     ``extrapolation_tau_s`` at ``straight_min_speed_mps`` or more (a transit, not a hover), the
-    run's own velocity, held as long as the run lasted (at most ``straight_max_hold_s``). ``scan_s``: how long a scan collects its points (the smear a fast
-    drone leaves)."""
+    run's own velocity, held as long as the run lasted (at most ``straight_max_hold_s``).
+    ``scan_s``: how long a scan collects its points (the smear a fast drone leaves)."""
     ends = {0: (velocity[0], 0.0), -1: (velocity[-1], 0.0)}
     if cfg.straight_rms_m <= 0:
         return ends
