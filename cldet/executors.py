@@ -42,7 +42,7 @@ from cldet.errors import CldetError, ExecutorError
 from cldet.progress import NullProgress, Progress
 from cldet.signals import Terminated, init_worker, sigterm_received, stop_workers
 
-__all__ = ["EXECUTORS", "RAY_INSTALL", "Outcome", "iter_outcomes"]
+__all__ = ["EXECUTORS", "RAY_INSTALL", "Outcome", "iter_outcomes", "runs_here"]
 
 EXECUTORS: tuple[str, ...] = ("local", "ray")
 RAY_INSTALL = 'pip install "cldet[ray]"'
@@ -169,10 +169,21 @@ def iter_outcomes(
         if not jobs:
             return _iter_here(fn, [], progress)
         return _as_given(_iter_ray(ray, fn, ordered, workers, ray_address, progress), order)
-    n_workers = min(workers or os.cpu_count() or 1, len(jobs))
-    if n_workers <= 1:
+    if runs_here(len(jobs), workers, executor):
         return _as_given(_iter_here(fn, ordered, progress), order)
-    return _as_given(_iter_pool(fn, ordered, n_workers, progress), order)
+    return _as_given(_iter_pool(fn, ordered, _local_workers(len(jobs), workers), progress), order)
+
+
+def _local_workers(n_jobs: int, workers: int | None) -> int:
+    """Worker processes the local executor starts for ``n_jobs`` (None: one per CPU)."""
+    return min(workers or os.cpu_count() or 1, n_jobs)
+
+
+def runs_here(n_jobs: int, workers: int | None, executor: str) -> bool:
+    """Whether :func:`iter_outcomes` runs these jobs one after another in this process (the
+    local executor with one worker or one job): the caller may then run them itself, with
+    progress finer than one unit per job."""
+    return executor == "local" and _local_workers(n_jobs, workers) <= 1
 
 
 def _as_given(

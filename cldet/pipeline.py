@@ -36,7 +36,7 @@ from cldet.core.methods import make_estimator
 from cldet.core.model import LearnedModel
 from cldet.core.trajectory import rms, trajectory_errors
 from cldet.errors import CldetError, FrameOrderError
-from cldet.executors import iter_outcomes
+from cldet.executors import iter_outcomes, runs_here
 from cldet.io import topics
 from cldet.io.files import check_output, file_size, lock_file
 from cldet.io.mcap_append import is_replaced_channel
@@ -521,7 +521,7 @@ def annotate_logs(
         raise CldetError(f"{len(outputs)} output paths for {len(logs)} logs")
     targets = list(outputs) if outputs is not None else [Path(log) for log in logs]
     progress = progress or NullProgress()
-    per_frame = executor == "local" and (workers is not None and workers <= 1 or len(logs) == 1)
+    per_frame = runs_here(len(logs), workers, executor)
     jobs = [
         _AnnotateJob(
             Path(log), Path(target), config, write_rrd, force, lidar, avia, truth, model, per_frame

@@ -47,7 +47,7 @@ from cldet.core.model import LearnedModel, one_thread
 from cldet.core.trajectory import evaluate_trajectory
 from cldet.errors import CldetError, OutputExistsError
 from cldet.evaluate import confusion_text
-from cldet.executors import iter_outcomes
+from cldet.executors import iter_outcomes, runs_here
 from cldet.io import topics
 from cldet.io.files import check_output, file_size
 from cldet.io.mcap_read import open_log
@@ -483,7 +483,7 @@ def _collect_all(
 ) -> list[SequenceSample]:
     """Every log's sample, in the order given; in this process (per-frame progress) or in
     parallel (per-log progress). An error of one log is raised, as in one process."""
-    if executor == "local" and (workers is not None and workers <= 1 or len(logs) == 1):
+    if runs_here(len(logs), workers, executor):
         return [collect_sequence(log, config, progress=make()) for log in logs]
     progress = make()
     progress.start(len(logs), "training passes")
@@ -520,8 +520,9 @@ def train_logs(
 ) -> TrainReport:
     """Learn a model from labelled ``logs`` and write it to ``out`` (atomically).
 
-    The logs' passes (most of the work) run in ``workers`` processes, or as Ray tasks with
-    ``executor="ray"`` (see :mod:`cldet.executors`); the model is the same either way.
+    The logs' passes (most of the work) run in ``workers`` processes (None: one per CPU), or as
+    Ray tasks with ``executor="ray"`` (None: as many at once as the cluster has CPUs; see
+    :mod:`cldet.executors`); the model is the same either way.
 
     Raises:
         TrainError: no logs, no truth, too few detections, one class of tracks only.

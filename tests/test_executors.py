@@ -14,7 +14,13 @@ import pytest
 from typer.testing import CliRunner
 
 from cldet.errors import ExecutorError
-from cldet.executors import Outcome, _check_reachable, _ProgressLedger, iter_outcomes
+from cldet.executors import (
+    Outcome,
+    _check_reachable,
+    _ProgressLedger,
+    iter_outcomes,
+    runs_here,
+)
 from tests.executor_jobs import pid, square
 
 
@@ -170,3 +176,10 @@ def test_cli_help_teaches_the_executors(cli: Callable[..., object], command: str
     text = " ".join(result.output.split())  # type: ignore[attr-defined]
     for words in ("--executor", "--ray-address", 'pip install "cldet[ray]"', "cluster"):
         assert words in text, words
+
+
+def test_runs_here_matches_where_iter_outcomes_runs_the_jobs() -> None:
+    assert runs_here(5, 1, "local") and runs_here(1, 4, "local") and runs_here(0, None, "local")
+    assert not runs_here(3, 2, "local")
+    assert runs_here(3, None, "local") == ((os.cpu_count() or 1) <= 1)
+    assert not runs_here(1, 1, "ray")  # a Ray task even for one job

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from enum import Enum
 from pathlib import Path
 from typing import Annotated
@@ -241,7 +240,7 @@ def annotate(
                     config=cfg,
                     outputs=[output] if output is not None else None,
                     write_rrd=not no_rrd,
-                    workers=workers or (None if on_ray else os.cpu_count() or 1),
+                    workers=workers or None,  # None: every CPU, here or of the Ray cluster
                     force=force,
                     progress=bar,
                     lidar=lidar,

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Annotated
 
@@ -91,7 +90,6 @@ def train(
     with handled():
         logs = expand_logs(logs)
         check_executor(executor, ray_address)
-        on_ray = executor is ExecutorChoice.ray
         cfg = load_config(config)
         with BarProgress() as bar:
             report = train_logs(
@@ -102,7 +100,7 @@ def train(
                 overwrite=overwrite,
                 progress_factory=lambda: bar,
                 warn=lambda m: echo_err(f"WARNING: {m}"),
-                workers=workers or (None if on_ray else os.cpu_count() or 1),
+                workers=workers or None,  # None: every CPU, here or of the Ray cluster
                 executor=executor.value,
                 ray_address=ray_address,
             )
