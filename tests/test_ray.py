@@ -181,15 +181,20 @@ def test_sigterm_mid_convert_on_ray_leaves_nothing_behind(tmp_path: Path) -> Non
     import sys
     import time
 
-    from tests.test_signals import REPO, SLOW_LOAD, build, digest, processes_left, temporaries
+    from tests.test_signals import (
+        SLOW_LOAD,
+        build,
+        digest,
+        hooked_env,
+        processes_left,
+        temporaries,
+    )
 
-    data, out, hook = tmp_path / "data", tmp_path / "logs", tmp_path / "hook"
+    data, out = tmp_path / "data", tmp_path / "logs"
     build(data)
-    hook.mkdir()
-    (hook / "sitecustomize.py").write_text(SLOW_LOAD)
     before = digest(data)
     tag = f"{os.getpid()}ray"
-    env = {**os.environ, "PYTHONPATH": f"{hook}:{REPO}", "CLDET_SIGNAL_TEST": tag}
+    env = hooked_env(tmp_path, SLOW_LOAD, tag)
     env.pop("RAY_ADDRESS", None)
     command = [sys.executable, "-m", "cldet", "convert", str(data), "-o", str(out)]
     run = subprocess.Popen(

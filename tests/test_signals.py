@@ -77,19 +77,26 @@ def processes_left(tag: str, within_s: float = 5.0) -> list[int]:
     return alive
 
 
+def hooked_env(tmp_path: Path, payload: str, tag: str) -> dict[str, str]:
+    """The environment of a run whose Python first executes ``payload`` (a sitecustomize.py in
+    a folder first on PYTHONPATH), its processes tagged ``tag`` for :func:`processes_left`."""
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(payload)
+    return {**os.environ, "PYTHONPATH": f"{hook}:{REPO}", "CLDET_SIGNAL_TEST": tag}
+
+
 def temporaries(out: Path) -> list[str]:
     return sorted(p.name for p in out.rglob(".*") if ".tmp-" in p.name or ".clean-" in p.name)
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
 def test_signal_mid_convert_leaves_nothing_behind(tmp_path: Path, sig: signal.Signals) -> None:
-    data, out, hook = tmp_path / "data", tmp_path / "logs", tmp_path / "hook"
+    data, out = tmp_path / "data", tmp_path / "logs"
     build(data)
-    hook.mkdir()
-    (hook / "sitecustomize.py").write_text(SLOW_LOAD)
     before = digest(data)
     tag = f"{os.getpid()}{sig.value}"
-    env = {**os.environ, "PYTHONPATH": f"{hook}:{REPO}", "CLDET_SIGNAL_TEST": tag}
+    env = hooked_env(tmp_path, SLOW_LOAD, tag)
     command = [
         sys.executable,
         "-m",
@@ -150,18 +157,16 @@ def test_signal_mid_annotate_leaves_the_log_intact(tmp_path: Path, sig: signal.S
     from cldet.io import LogWriter
     from cldet.io import topics as tp
 
-    log, hook = tmp_path / "seq0001.mcap", tmp_path / "hook"
+    log = tmp_path / "seq0001.mcap"
     rng = np.random.default_rng(2)
     with open(log, "wb") as f, LogWriter(f) as writer:
         for i in range(20):
             points = rng.normal(0, 20, (50, 3)).astype(np.float32)  # few: the line search is quick
             writer.write_cloud(tp.LIDAR_360, 10**18 + i * 10**8, points, tp.FRAME_MID360)
         writer.write_metadata(tp.METADATA_SOURCE, {"sequence": "seq0001", "split": "val"})
-    hook.mkdir()
-    (hook / "sitecustomize.py").write_text(SLOW_FRAMES)
     before = log.read_bytes()
     tag = f"{os.getpid()}a{sig.value}"
-    env = {**os.environ, "PYTHONPATH": f"{hook}:{REPO}", "CLDET_SIGNAL_TEST": tag}
+    env = hooked_env(tmp_path, SLOW_FRAMES, tag)
     command = [sys.executable, "-m", "cldet", "annotate", str(log)]  # with the .rrd
     run = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 60
