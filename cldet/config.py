@@ -112,6 +112,15 @@ class BackgroundConfig(BaseModel):
         description="static = reached in at least this fraction of the window's bins (swaying"
         " foliage that fills a direction part of the time stays background)",
     )
+    recurrent_bins: int = Field(
+        default=3,
+        ge=0,
+        le=600,
+        description="static is also the nearest range that recurs (within the margin) in at"
+        " least this many of the window's bins: a thin or far structure hit only now and then"
+        " (a pole, a wire, a branch 30 m out) returns the same range each time, rain and passing"
+        " things do not (0: off)",
+    )
     dilate_cells: int = Field(
         default=1, ge=0, le=3, description="grow the static range by this many cells"
     )
@@ -136,6 +145,13 @@ class BackgroundConfig(BaseModel):
         default=True,
         description="points of confirmed small moving tracks are not learned as background (a"
         " drone that flew in and hovers stays foreground)",
+    )
+    protect_min_moved_m: float = Field(
+        default=1.2,
+        ge=0,
+        description="... once the running mean of the track's detections has moved this far:"
+        " beyond the largest drone, so that a sparse far structure lit in different places"
+        " each scan (its centroid scatters, its mean stays) is learned, not protected for ever",
     )
 
 
@@ -202,7 +218,11 @@ class TrackingConfig(BaseModel):
         " more (0: off)",
     )
     fixed_factor: float = Field(
-        default=0.1, gt=0, le=1, description="score factor of a rigidly fixed track"
+        default=0.01,
+        gt=0,
+        le=1,
+        description="score factor of a rigidly fixed track (no multirotor holds its mean"
+        " position to centimetres: structure beyond doubt, so far below the static factor)",
     )
     static_spread_m: float = Field(
         default=0.5,

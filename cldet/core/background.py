@@ -17,6 +17,10 @@ ray. The model is a static range image, learned causally (only the past is used)
    a two-scan minimum scatters at grazing incidence, and a low fraction keeps that background).
    A wall, the ground or a tree gives that range in every bin; foliage swaying in and out of a
    direction fills it part of the time and stays background; a drone passing through does not.
+   The static range is also the nearest range that *recurs*: reached, within the margin of
+   step 6, in at least ``recurrent_bins`` (3) of the window's bins. A thin or far structure
+   (a pole, a wire, a branch 30 m out) is hit only now and then, but always at its own range;
+   rain and passing things do not come back to one range in one direction.
    A drone that stops and hovers would become background after a few seconds: the estimator
    withholds the points of confirmed small moving tracks from ``update`` (``protect_tracks``),
    so what was seen arriving is never learned as environment.
@@ -29,7 +33,10 @@ ray. The model is a static range image, learned causally (only the past is used)
    max(0.5 m, 5 %). One exception to the clearance: right below the blob, up to three cells of a
    separate surface (not range-continuous with it) may be nearer than the clearance: a drone
    hovering a metre above a post top is seen with the top in the next cell down. A lamp head
-   is attached to its pole (range-continuous), so it stays part of the pole's blob.
+   is attached to its pole (range-continuous), so it stays part of the pole's blob. A blob
+   beside a cell outside the field of view (never hit, below the lowest elevation the sensors
+   see: ``field_bottom_deg``) does not float: no free space is known there, and the ground or
+   a hedge seen on the field's lowest row is the visible end of something larger.
 5. Dilation: the static range is replaced by the minimum over the cell and its 8 neighbours
    (azimuth wraps), ``dilate_cells`` times: beam divergence at edges stays background.
 6. A point is background when its range is not shorter than the static range by more than
@@ -171,6 +178,34 @@ def _classify_kernel(
 
 
 @numba.njit(cache=True)
+def _recurrent_kernel(
+    window: NDArray[np.float32], m: int, margin_m: float, margin_fraction: float
+) -> NDArray[np.float32]:
+    """Per row of per-bin minima (C, B): the nearest range reached, within the margin, in at
+    least ``m`` bins (the farthest of those ``m``), inf when none recurs."""
+    n, b = window.shape
+    out = np.full(n, np.inf, dtype=np.float32)
+    v = np.empty(b, dtype=np.float32)
+    for c in range(n):
+        k = 0
+        for j in range(b):  # insertion sort of the finite minima
+            x = window[c, j]
+            if not np.isfinite(x):
+                continue
+            i = k
+            while i > 0 and v[i - 1] > x:
+                v[i] = v[i - 1]
+                i -= 1
+            v[i] = x
+            k += 1
+        for i in range(k - m + 1):
+            if v[i + m - 1] - v[i] <= max(margin_m, margin_fraction * v[i]):
+                out[c] = v[i + m - 1]
+                break
+    return out
+
+
+@numba.njit(cache=True)
 def _run_width(static: NDArray[np.float32], e: int, a: int) -> int:
     """Cells in row ``e`` range-continuous with cell ``a`` in a run (counted up to 9)."""
     n_az = static.shape[1]
@@ -190,9 +225,13 @@ def _run_width(static: NDArray[np.float32], e: int, a: int) -> int:
 
 @numba.njit(cache=True)
 def _floating_blobs(
-    static: NDArray[np.float32], cell_deg: float, max_size: float
+    static: NDArray[np.float32], cell_deg: float, max_size: float, unknown: NDArray[np.bool_]
 ) -> NDArray[np.bool_]:
-    """Cells of small static blobs floating in free space (see the module docstring, step 4)."""
+    """Cells of small static blobs floating in free space (see the module docstring, step 4).
+
+    ``unknown`` (n_el, n_az) marks cells outside the field of view: no free space is known
+    there, so a blob beside one may be the visible end of something larger.
+    """
     n_el, n_az = static.shape
     comp = np.full((n_el, n_az), -1, dtype=np.int64)
     out = np.zeros((n_el, n_az), dtype=np.bool_)
@@ -268,6 +307,9 @@ def _floating_blobs(
                         if comp[ee, aa] == n_comp:
                             continue
                         n_border += 1
+                        if unknown[ee, aa]:
+                            ok = False
+                            break
                         rn = static[ee, aa]
                         if not np.isfinite(rn):
                             continue
@@ -300,8 +342,11 @@ class BackgroundModel:
     always judged by the past; until the first bin ends (``warm``) nothing is foreground.
     """
 
-    def __init__(self, cfg: BackgroundConfig) -> None:
+    def __init__(self, cfg: BackgroundConfig, field_bottom_deg: float = -90.0) -> None:
+        """``field_bottom_deg``: the lowest elevation any sensor sees (in the sensor's frame);
+        never-hit cells below it are outside the field of view, not free space."""
         self.cfg = cfg
+        self._field_bottom_deg = field_bottom_deg
         self._n_az = int(round(360.0 / cfg.cell_deg))
         self._n_el = int(np.ceil(180.0 / cfg.cell_deg))
         n_cells = self._n_el * self._n_az
@@ -361,10 +406,17 @@ class BackgroundModel:
         kth = np.full(len(self._seen), np.inf, dtype=np.float32)
         window = self._ring[seen, :b]
         kth[seen] = np.partition(window, k - 1, axis=1)[:, k - 1] if b > 1 else window[:, 0]
+        if 0 < cfg.recurrent_bins <= b:
+            recurrent = _recurrent_kernel(
+                window, cfg.recurrent_bins, float(cfg.margin_m), float(cfg.margin_fraction)
+            )
+            kth[seen] = np.minimum(kth[seen], recurrent)
         static = kth.reshape(self._n_el, self._n_az)
         self.floating_cells = 0
         if cfg.floating_max_size_m > 0:
-            floating = _floating_blobs(static, float(cfg.cell_deg), float(cfg.floating_max_size_m))
+            floating = _floating_blobs(
+                static, float(cfg.cell_deg), float(cfg.floating_max_size_m), self._unknown()
+            )
             self.floating_cells = int(floating.sum())
             if self.floating_cells:
                 static = np.where(floating, np.float32(np.inf), static)
@@ -388,6 +440,12 @@ class BackgroundModel:
         last = self._last_points
         if len(last) and (self.n_bins % _GROUND_EVERY_BINS == 1 or not self.ground.fitted):
             self.ground.fit(last[self.classify(last) == CORE])
+
+    def _unknown(self) -> NDArray[np.bool_]:
+        """(n_el, n_az) cells never hit whose centre lies below the field of view."""
+        centre_deg = (np.arange(self._n_el) + 0.5) * self.cfg.cell_deg - 90.0
+        below = (centre_deg < self._field_bottom_deg)[:, None]
+        return below & ~self._seen.reshape(self._n_el, self._n_az)
 
     def classify(self, points: NDArray[np.floating]) -> NDArray[np.uint8]:
         """Label each point (N,3) FOREGROUND (0), MARGIN (1) or CORE (2) background.

@@ -21,7 +21,9 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    time its points were taken (the stamp plus ``frames.scan_offset_s``, the middle of the
    scan); a confirmed moving track that gets no cluster continues on the raw points near its
    prediction; the points of confirmed small moving tracks are withheld from the background
-   (``background.protect_tracks``), so a drone that stops to hover is not learned;
+   (``background.protect_tracks``), so a drone that stops to hover is not learned: while their
+   detections lie within a drone's size, or once their half-second mean has moved
+   ``background.protect_min_moved_m`` (``_flew``);
 5. the causal choice: the active track with the highest running evidence (the per-detection
    weights of ``cldet.core.selection``, times its static and speed factors so far; a challenger
    must beat the current choice by ``_SWITCH_RATIO``; no track is reported before one has
@@ -237,7 +239,9 @@ class TrackEstimator:
         self.config = config
         self.model = model  # learned scorer and type classifier (None: the hand-set defaults)
         self._candidates: Candidates | None = None
-        self.background = BackgroundModel(config.background)
+        self.background = BackgroundModel(
+            config.background, field_bottom_deg=config.tracking.fov_bottom_deg
+        )
         self._tracker = CandidateTracker(config.tracking)
         self._stamps: list[int] = []
         self._tables: list[ClusterTable] = []
@@ -365,7 +369,7 @@ class TrackEstimator:
                     continue
                 # a confirmed small mover's cluster opens (or moves) its protected place; a
                 # small cluster in such a place keeps it (the track may have restarted there)
-                if tracker.is_confirmed_mover(tid):
+                if self._flew(tid):
                     where = tid
                 elif zone[j] >= 0:
                     where = int(zone[j])
@@ -394,13 +398,28 @@ class TrackEstimator:
                 tc,
             )
             self._evidence.setdefault(tid, _Evidence()).add(t_s, float(w[0]), pos, False)
-            if protect:
+            if protect and self._flew(tid):
                 self._zones[tid] = (np.asarray(pos, dtype=np.float64).copy(), t_s)
                 if keep is None:
                     keep = np.ones(len(pts), dtype=bool)
                 d = pts - pos.astype(np.float32)
                 keep &= np.einsum("ij,ij->i", d, d) > gate2
         return keep
+
+    def _flew(self, track_id: int) -> bool:
+        """Whether a confirmed mover is protected: its detections still lie within a drone's
+        size (``max_size_m``: a hover, sparse returns from one small body), or their running
+        mean has moved at least ``background.protect_min_moved_m`` (a flight). A track whose
+        detections scatter wider while their mean stays is a larger static thing lit in
+        different places each scan (a far hedge, a swaying edge): it is learned."""
+        tracker = self._tracker
+        if not tracker.is_confirmed_mover(track_id):
+            return False
+        if tracker.spread(track_id) <= self.config.tracking.max_size_m:
+            return True
+        ev = self._evidence.get(track_id)
+        moved = ev.mean_moved if ev is not None and ev.means else 0.0
+        return moved >= self.config.background.protect_min_moved_m
 
     def _reclaim(self, pts: NDArray[np.float32], labels: NDArray[np.uint8]) -> None:
         """Points background only through dilation (MARGIN) near a protected mover's last place

@@ -27,13 +27,15 @@ each detection weighted by per-detection evidence and the track's factors:
   than ``static_spread_m`` over the track's span (a swaying or flickering clump far away):
   static clutter, or a drone hovering the whole time (kept when nothing else is there, but a
   real mover wins). This holds at every elevation: nothing assumes an open sky;
-* fixed: factor ``fixed_factor`` (0.1) instead when, over at least 2 s, the running mean of
+* fixed: factor ``fixed_factor`` (0.01) instead when, over at least 2 s, the running mean of
   5 detections (about half a second) stays within ``fixed_spread_m`` (2.5 cm, 90 %) of its
   median: a multirotor holding position still wanders by centimetres to decimetres (its
   position controller, the wind), so a mean position fixed to a few centimetres is rigid
   structure (a sign, a lamp head) that the background keeps as foreground because it floats.
   The mean averages the sampling noise away only for objects with many points: a sparse or far
-  object never looks fixed;
+  object never looks fixed. The factor is far below the static one because this is near
+  certainty, not a likelihood: at 0.1 such a track of 80 detections still outweighed a drone
+  hovering low beside a bush (0.1 for its height times 0.6 for static per detection);
 * motion consistency: a detection whose NIS exceeds 7.81 (the 95 % point of chi^2, 3 dof)
   weighs exp(-(NIS - 7.81) / 7.81): smooth motion keeps its weight, erratic speckle or a
   bird's jinks lose it;

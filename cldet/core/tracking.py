@@ -411,6 +411,10 @@ class CandidateTracker:
             cfg.raw_min_cluster_hits, cfg.raw_min_spread_m, cfg.max_size_m
         )
 
+    def spread(self, track_id: int) -> float:
+        """Largest edge of the box around a track's cluster detections, metres."""
+        return self._hits[track_id].spread
+
     def last_hit(self, track_id: int) -> tuple[int, int, NDArray[np.float64], float]:
         """A track's latest detection: frame index, cluster index (-1: raw gate), position, NIS."""
         hits = self._hits[track_id]

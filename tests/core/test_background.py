@@ -123,8 +123,8 @@ def _range_image(cells: dict[tuple[int, int], float]) -> np.ndarray:
     return image
 
 
-def _floats(image: np.ndarray) -> np.ndarray:
-    return _floating_blobs(image, 2.0, 1.2)
+def _floats(image: np.ndarray, unknown: np.ndarray | None = None) -> np.ndarray:
+    return _floating_blobs(image, 2.0, 1.2, np.zeros(image.shape, bool) if unknown is None else unknown)
 
 
 def test_a_blob_over_a_separate_pole_top_right_below_floats() -> None:
@@ -215,7 +215,7 @@ def test_hidden_below_is_true_where_the_ground_margin_would_swallow_what_continu
             at(0.5, h),  # a shoulder 1.6 m up: one cell lower is swallowed by the ground
             at(10.0, h),  # a drone 15 m out, 4 m up: below it only far ground or sky
             at(10.0, 10.0, az_deg=0.0),  # a drone 2 m in front of the wall
-            [6.0, -4.0, 1.3],  # a drone hovering over the post: what lies below is not ground
+            [6.0, -4.0, 1.6],  # a drone hovering over the post: what lies below is not ground
         ],
         dtype=np.float32,
     )
@@ -237,3 +237,58 @@ def test_a_ceiling_right_above_is_learned_as_background() -> None:
     up = np.degrees(np.arcsin(pts[:, 2] / np.linalg.norm(pts, axis=1))) > 80.0
     assert up.sum() > 200
     assert np.mean(model.classify(pts)[up] != FOREGROUND) > 0.99
+
+
+def test_a_blob_at_the_bottom_edge_of_the_field_of_view_does_not_float() -> None:
+    # two cells of ground seen at a grazing angle on the lowest row the sensor sees (-8 to -6
+    # deg), far surfaces above them: below lies no free space but the unseen, so they may be
+    # the visible end of something larger
+    edge = {(41, 100): 36.4, (41, 101): 36.1}
+    above = {(42, a): 48.0 for a in range(98, 104)}
+    image = _range_image(edge | above)
+    unknown = np.zeros(image.shape, bool)
+    unknown[:41] = True  # rows below -8 deg: outside the field of view, never hit
+    assert not _floats(image, unknown).any()
+    out = _floats(image)  # were those rows free space, the two cells would float
+    assert all(out[c] for c in edge)
+
+
+def test_only_never_hit_cells_below_the_field_of_view_are_unknown() -> None:
+    model = _learn([[]] * 20)
+    bottom = BackgroundModel(BackgroundConfig(), field_bottom_deg=-7.3)
+    bottom = _feed(bottom, [scan(np.random.default_rng(k), boxes=[POST]) for k in range(20)])
+    assert not model._unknown().any()  # no field of view given: nothing is unknown
+    unknown = bottom._unknown()
+    rows = np.flatnonzero(unknown.any(axis=1))
+    assert rows.max() == 40  # the row of -10 to -8 deg; -8 to -6 deg holds the lowest returns
+    assert not unknown[42:].any()
+
+
+def test_a_thin_structure_hit_now_and_then_is_background_and_rain_is_not() -> None:
+    # a mast 30 m away (0.1 m thick, 7 m tall) returns in about one bin of six, always at the
+    # same range; rain returns in another direction at scattered ranges as often
+    rng = np.random.default_rng(4)
+    rain_dir = np.array([0.0, 1.0, 0.3]) / np.hypot(1.0, 0.3)
+
+    def mast(n: int) -> np.ndarray:
+        z = np.linspace(-1.0, 6.0, n) + rng.uniform(-0.1, 0.1, n)
+        return np.column_stack([np.full(n, -30.0), np.zeros(n), z]).astype(np.float32)
+
+    def frame(k: int) -> np.ndarray:
+        pts = [scan(rng, boxes=[POST])]
+        if k % 12 in (0, 1):
+            pts.append(mast(8))
+        if k % 12 in (6, 7):
+            pts.append((rain_dir * rng.uniform(5.0, 25.0))[None, :].astype(np.float32))
+        return np.concatenate(pts)
+
+    scans = [frame(k) for k in range(60)]
+    on = _feed(BackgroundModel(BackgroundConfig()), scans)
+    off = _feed(BackgroundModel(BackgroundConfig(recurrent_bins=0)), scans)
+    probe = mast(50)
+    probe = probe[probe[:, 2] > 0.5]  # above the ground seen behind its foot
+    assert np.mean(on.classify(probe) != FOREGROUND) > 0.9
+    assert np.mean(off.classify(probe) == FOREGROUND) > 0.9  # under a quarter of the bins
+    # a drone 28 m out in the rain's direction is in front of no learned surface
+    drone = (rain_dir * 28.0)[None, :].astype(np.float32)
+    assert on.classify(drone)[0] == FOREGROUND
