@@ -290,6 +290,13 @@ class TrackingConfig(BaseModel):
         " detection weights after its first) reaches this; before any track has, the estimate"
         " is FALLBACK (0: the first track with a second detection)",
     )
+    causal_judge_s: float = Field(
+        default=1.0,
+        ge=0,
+        description="causal: a track is chosen only once it has lived this long, and is judged"
+        " static or rigidly fixed from then on (a still object and a drone just arrived look"
+        " alike for their first second; 0: chosen at once, judged only after 1 s and 2 s)",
+    )
     line_search: bool = Field(
         default=True,
         description="track-before-detect for sparse fast movers: constant-velocity lines through"

@@ -27,8 +27,10 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
 5. the causal choice: the active track with the highest running evidence (the per-detection
    weights of ``cldet.core.selection``, times its static and speed factors so far; a challenger
    must beat the current choice by ``_SWITCH_RATIO``; no track is reported before one has
-   gathered ``tracking.causal_confirm``); the estimate is that track's filtered state moved
-   back from the points' time to the stamp.
+   gathered ``tracking.causal_confirm``, and none is chosen before it has lived
+   ``tracking.causal_judge_s``, from when on it is judged static or rigidly fixed: for its
+   first second a still object, say a sign overhead, looks like a drone that just arrived);
+   the estimate is that track's filtered state moved back from the points' time to the stamp.
 
 ``refine``: the candidate tracks plus the constant-velocity lines of sparse fast movers
 (``cldet.core.lines``, track-before-detect); the drone's chain of tracks chosen by
@@ -94,7 +96,7 @@ __all__ = [
 
 _LOST_AFTER_S = 0.5  # a gap without detection longer than this is reported as lost/reacquired
 _SWITCH_RATIO = 1.3  # causal choice: a challenger must have this much more evidence
-_JUDGE_STATIC_S = 1.0  # causal: a track must live this long before it is judged static
+_JUDGE_STATIC_S = 1.0  # causal, without causal_judge_s: a track is judged static after this
 
 
 @dataclass(frozen=True)
@@ -203,19 +205,27 @@ class _Evidence:
             self.mean_moved = float(np.max(self.mean_upper - self.mean_lower))
             self.means += 1
 
+    @property
+    def lived(self) -> float:
+        """Seconds from the first detection to the last."""
+        return self.last_t_s - self.first_t_s
+
     def score(self, cfg: TrackingConfig) -> float:
         """Running evidence; "static" and "fixed" (see ``cldet.core.selection``: here the box
         around the running means, whose edge is about twice the spread) are judged once the
-        track has lived ``_JUDGE_STATIC_S`` (fixed: ``FIXED_JUDGE_S``)."""
-        lived = self.last_t_s - self.first_t_s
+        track has lived ``causal_judge_s`` (when 0: ``_JUDGE_STATIC_S``, fixed
+        ``FIXED_JUDGE_S``)."""
+        lived = self.lived
         factor = 1.0
+        judge_fixed = cfg.causal_judge_s or FIXED_JUDGE_S
+        judge_static = cfg.causal_judge_s or _JUDGE_STATIC_S
         if (
-            lived >= FIXED_JUDGE_S
+            lived >= judge_fixed
             and self.means > FIXED_MEAN_HITS
             and self.mean_moved < 2.0 * cfg.fixed_spread_m
         ):
             factor = cfg.fixed_factor
-        elif lived >= _JUDGE_STATIC_S and self.moved < 2.0 * cfg.static_spread_m:
+        elif lived >= judge_static and self.moved < 2.0 * cfg.static_spread_m:
             factor = cfg.static_factor
         return self.weight * factor * (1.0 + 0.5 * self.both / max(self.hits, 1))
 
@@ -463,6 +473,8 @@ class TrackEstimator:
                 continue
             row[tid] = i
             sc = ev.score(tc)
+            if tid != self._choice and ev.lived < tc.causal_judge_s:
+                continue  # not chosen before it can be judged static or fixed
             if tid == self._choice:
                 current_score = sc
             # ties (young tracks) go to the one seen with more points now: the surer object
