@@ -490,7 +490,8 @@ def test_the_causal_estimate_does_not_follow_a_still_object_before_it_is_judged(
 
 def test_the_causal_estimate_waits_for_confirmation() -> None:
     # something large crosses the view for three scans right after the warm-up, then the drone
-    # is alone: unconfirmed, the causal estimate reports the passer; confirmed, it waits
+    # is alone: unconfirmed, the causal estimate reports the passer; confirmed, it waits (the
+    # judging second, causal_judge_s, would hold the passer back as well: off here)
     spot = np.array([8.0, 3.0, 2.0])
 
     def objects(k: int) -> list[tuple[tuple[float, ...], float]]:
@@ -502,8 +503,8 @@ def test_the_causal_estimate_waits_for_confirmation() -> None:
     frames = _with_objects(0, 30, objects)
 
     def worst(confirm: float) -> float:
-        cfg = load_config(overrides={"tracking": {"causal_confirm": confirm}})
-        _, result = estimate_sequence(frames, cfg)
+        tracking = {"causal_confirm": confirm, "causal_judge_s": 0.0}
+        _, result = estimate_sequence(frames, load_config(overrides={"tracking": tracking}))
         errors = [
             np.linalg.norm(e.position - (spot + [0.0, 0.05 * k, 0.0]))
             for k, e in enumerate(result.causal)
