@@ -23,7 +23,7 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    prediction; the points of confirmed small moving tracks are withheld from the background
    (``background.protect_tracks``), so a drone that stops to hover is not learned: while their
    detections lie within a drone's size, or once their half-second mean has moved
-   ``background.protect_min_moved_m`` (``_flew``);
+   ``background.protect_min_moved_m`` (``_protects``);
 5. the causal choice: the active track with the highest running evidence (the per-detection
    weights of ``cldet.core.selection``, times its static and speed factors so far; a challenger
    must beat the current choice by ``_SWITCH_RATIO``; no track is reported before one has
@@ -379,7 +379,7 @@ class TrackEstimator:
                     continue
                 # a confirmed small mover's cluster opens (or moves) its protected place; a
                 # small cluster in such a place keeps it (the track may have restarted there)
-                if self._flew(tid):
+                if self._protects(tid):
                     where = tid
                 elif zone[j] >= 0:
                     where = int(zone[j])
@@ -408,7 +408,7 @@ class TrackEstimator:
                 tc,
             )
             self._evidence.setdefault(tid, _Evidence()).add(t_s, float(w[0]), pos, False)
-            if protect and self._flew(tid):
+            if protect and self._protects(tid):
                 self._zones[tid] = (np.asarray(pos, dtype=np.float64).copy(), t_s)
                 if keep is None:
                     keep = np.ones(len(pts), dtype=bool)
@@ -416,7 +416,7 @@ class TrackEstimator:
                 keep &= np.einsum("ij,ij->i", d, d) > gate2
         return keep
 
-    def _flew(self, track_id: int) -> bool:
+    def _protects(self, track_id: int) -> bool:
         """Whether a confirmed mover is protected: its detections still lie within a drone's
         size (``max_size_m``: a hover, sparse returns from one small body), or their running
         mean has moved at least ``background.protect_min_moved_m`` (a flight). A track whose

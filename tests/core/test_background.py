@@ -124,7 +124,9 @@ def _range_image(cells: dict[tuple[int, int], float]) -> np.ndarray:
 
 
 def _floats(image: np.ndarray, unknown: np.ndarray | None = None) -> np.ndarray:
-    return _floating_blobs(image, 2.0, 1.2, np.zeros(image.shape, bool) if unknown is None else unknown)
+    return _floating_blobs(
+        image, 2.0, 1.2, np.zeros(image.shape, bool) if unknown is None else unknown
+    )
 
 
 def test_a_blob_over_a_separate_pole_top_right_below_floats() -> None:
