@@ -144,6 +144,13 @@ def _clearance(r: float) -> float:
     return max(_SAME_SURFACE_M, _SAME_SURFACE_FRACTION * r)
 
 
+@numba.njit(cache=True, inline="always")
+def _margin(r: float, margin_m: float, margin_fraction: float) -> float:
+    """How much nearer than a surface a return at range ``r`` must be to lie in front of it
+    (step 6, without the grazing slack); also what "the same range" means for recurrence."""
+    return max(margin_m, margin_fraction * r)
+
+
 @numba.njit(cache=True)
 def _nearest_kernel(
     cells: NDArray[np.int64], rng: NDArray[np.float32], nearest: NDArray[np.float32]
@@ -169,7 +176,7 @@ def _classify_kernel(
     out = np.zeros(n, dtype=np.uint8)
     for i in range(n):
         c = cells[i]
-        limit = rng[i] + max(margin_m, margin_fraction * rng[i], slack[c])
+        limit = rng[i] + max(_margin(rng[i], margin_m, margin_fraction), slack[c])
         if limit >= static[c]:
             out[i] = 2
         elif limit >= dilated[c]:
@@ -199,7 +206,7 @@ def _recurrent_kernel(
             v[i] = x
             k += 1
         for i in range(k - m + 1):
-            if v[i + m - 1] - v[i] <= max(margin_m, margin_fraction * v[i]):
+            if v[i + m - 1] - v[i] <= _margin(v[i], margin_m, margin_fraction):
                 out[c] = v[i + m - 1]
                 break
     return out

@@ -428,7 +428,7 @@ class TrackEstimator:
         if tracker.spread(track_id) <= self.config.tracking.max_size_m:
             return True
         ev = self._evidence.get(track_id)
-        moved = ev.mean_moved if ev is not None and ev.means else 0.0
+        moved = ev.mean_moved if ev is not None else 0.0  # 0 until a mean is taken
         return moved >= self.config.background.protect_min_moved_m
 
     def _reclaim(self, pts: NDArray[np.float32], labels: NDArray[np.uint8]) -> None:
@@ -472,9 +472,9 @@ class TrackEstimator:
             if ev is None:
                 continue
             row[tid] = i
-            sc = ev.score(tc)
             if tid != self._choice and ev.lived < tc.causal_judge_s:
                 continue  # not chosen before it can be judged static or fixed
+            sc = ev.score(tc)
             if tid == self._choice:
                 current_score = sc
             # ties (young tracks) go to the one seen with more points now: the surer object
