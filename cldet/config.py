@@ -149,9 +149,18 @@ class BackgroundConfig(BaseModel):
     protect_min_moved_m: float = Field(
         default=1.2,
         ge=0,
-        description="... once the running mean of the track's detections has moved this far:"
+        description="... once the running mean of the track's detections lies this far from"
+        " its first value:"
         " beyond the largest drone, so that a sparse far structure lit in different places"
         " each scan (its centroid scatters, its mean stays) is learned, not protected for ever",
+    )
+    protect_dense_points: int = Field(
+        default=3,
+        ge=0,
+        description="... and, before the running mean exists, while every cluster detection"
+        " had at least this many points: a centroid scatters by metres only when it rests on a"
+        " few returns of a larger thing; a dense compact cluster that jumps is one object moving"
+        " (0: off)",
     )
 
 

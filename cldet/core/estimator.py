@@ -22,8 +22,9 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    scan); a confirmed moving track that gets no cluster continues on the raw points near its
    prediction; the points of confirmed small moving tracks are withheld from the background
    (``background.protect_tracks``), so a drone that stops to hover is not learned: while their
-   detections lie within a drone's size, or once their half-second mean has moved
-   ``background.protect_min_moved_m`` (``_protects``);
+   detections lie within a drone's size, once their half-second mean lies
+   ``background.protect_min_moved_m`` from its first value, or, younger, while their clusters
+   are dense (``_protects``);
 5. the causal choice: the active track with the highest running evidence (the per-detection
    weights of ``cldet.core.selection``, times its static and speed factors so far; a challenger
    must beat the current choice by ``_SWITCH_RATIO``; no track is reported before one has
@@ -182,6 +183,8 @@ class _Evidence:
     mean_upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
     means: int = 0  # running means of FIXED_MEAN_HITS detections taken into the box
     mean_moved: float = 0.0  # largest edge of the box around those means, metres
+    first_mean: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    displaced: float = 0.0  # from the first running mean to the latest, metres
 
     def add(self, t_s: float, weight: float, position: NDArray[np.float64], both: bool) -> None:
         if self.hits:
@@ -203,6 +206,9 @@ class _Evidence:
             np.minimum(self.mean_lower, mean, out=self.mean_lower)
             np.maximum(self.mean_upper, mean, out=self.mean_upper)
             self.mean_moved = float(np.max(self.mean_upper - self.mean_lower))
+            if self.means == 0:
+                self.first_mean = mean
+            self.displaced = float(np.linalg.norm(mean - self.first_mean))
             self.means += 1
 
     @property
@@ -419,17 +425,25 @@ class TrackEstimator:
     def _protects(self, track_id: int) -> bool:
         """Whether a confirmed mover is protected: its detections still lie within a drone's
         size (``max_size_m``: a hover, sparse returns from one small body), or their running
-        mean has moved at least ``background.protect_min_moved_m`` (a flight). A track whose
+        mean now lies ``background.protect_min_moved_m`` or more from the first one (a flight;
+        the box around all the means would grow with a long life's scatter alone), or, before
+        a running mean exists, every cluster detection had ``background.protect_dense_points``
+        or more (one compact object that jumped, say after being hidden). A track whose
         detections scatter wider while their mean stays is a larger static thing lit in
-        different places each scan (a far hedge, a swaying edge): it is learned."""
+        different places each scan (a far hedge, a pole, a swaying edge): it is learned."""
         tracker = self._tracker
         if not tracker.is_confirmed_mover(track_id):
             return False
         if tracker.spread(track_id) <= self.config.tracking.max_size_m:
             return True
+        bc = self.config.background
         ev = self._evidence.get(track_id)
-        moved = ev.mean_moved if ev is not None else 0.0  # 0 until a mean is taken
-        return moved >= self.config.background.protect_min_moved_m
+        if ev is None or ev.means == 0:
+            # too young for a running mean: a centroid jumps by more than a drone's size
+            # across sparse returns of a larger thing, not across dense compact clusters
+            dense = bc.protect_dense_points
+            return 0 < dense <= tracker.fewest_points(track_id)
+        return ev.displaced >= bc.protect_min_moved_m
 
     def _reclaim(self, pts: NDArray[np.float32], labels: NDArray[np.uint8]) -> None:
         """Points background only through dilation (MARGIN) near a protected mover's last place
@@ -626,14 +640,12 @@ def refine_candidates(
     var[seg] = sm.pos_var
     q, tau_s = cfg.smoothing.accel_psd, cfg.smoothing.extrapolation_tau_s
     scan_s = float(np.median(np.diff(t_s))) if n > 1 else 0.0  # a scan lasts a frame period
-    ends = _extrapolation_ends(t_s[idx], z[idx], sm.velocity, scan_s, cfg.smoothing)
+    ends = _extrapolation_ends(t_s[idx], z[idx], sm.position, sm.velocity, scan_s, cfg.smoothing)
     for f in list(range(first)) + list(range(last + 1, n)):
         k_end = 0 if f < first else -1
-        velocity, hold_s = ends[k_end]
+        origin, velocity, hold_s = ends[k_end]
         dt = t_s[f] - t_s[first if f < first else last] - offset_s
-        pos[f], var[f] = extrapolate(
-            sm.position[k_end], velocity, sm.cov[k_end], dt, q, tau_s, hold_s
-        )
+        pos[f], var[f] = extrapolate(origin, velocity, sm.cov[k_end], dt, q, tau_s, hold_s)
     pos = apply_bias(pos, cfg.bias)
 
     estimates = []
@@ -662,17 +674,21 @@ def refine_candidates(
 def _extrapolation_ends(
     t: NDArray[np.float64],
     z: NDArray[np.float64],
+    position: NDArray[np.float64],
     velocity: NDArray[np.float64],
     scan_s: float,
     cfg: SmoothingConfig,
-) -> dict[int, tuple[NDArray[np.float64], float]]:
-    """The velocity beyond the start (key 0) and the end (key -1) of the detections ``z`` at
-    times ``t``, and how long it holds before it decays: the smoother's, not held; but where the
-    detections ending (starting) the track run straight for longer than
-    ``extrapolation_tau_s`` at ``straight_min_speed_mps`` or more (a transit, not a hover), the
-    run's own velocity, held as long as the run lasted (at most ``straight_max_hold_s``).
+) -> dict[int, tuple[NDArray[np.float64], NDArray[np.float64], float]]:
+    """Where the extrapolation beyond the start (key 0) and the end (key -1) of the detections
+    ``z`` at times ``t`` starts, its velocity, and how long that holds before it decays: the
+    smoother's end state (``position``, ``velocity``), not held; but where the detections
+    ending (starting) the track run straight for longer than ``extrapolation_tau_s`` at
+    ``straight_min_speed_mps`` or more (a transit, not a hover), the run's own line: its
+    position at the end detection's time and its velocity, fitted to the whole run (the
+    smoother's end state rests on the last few detections, each smeared along the path by the
+    scan), held as long as the run lasted (at most ``straight_max_hold_s``).
     ``scan_s``: how long a scan collects its points (the smear a fast drone leaves)."""
-    ends = {0: (velocity[0], 0.0), -1: (velocity[-1], 0.0)}
+    ends = {0: (position[0], velocity[0], 0.0), -1: (position[-1], velocity[-1], 0.0)}
     if cfg.straight_rms_m <= 0:
         return ends
     for key, (tt, zz, sign) in {0: (-t[::-1], z[::-1], -1.0), -1: (t, z, 1.0)}.items():
@@ -682,7 +698,8 @@ def _extrapolation_ends(
             and run.duration_s > cfg.extrapolation_tau_s
             and float(np.linalg.norm(run.velocity)) >= cfg.straight_min_speed_mps
         ):
-            ends[key] = (sign * run.velocity, min(run.duration_s, cfg.straight_max_hold_s))
+            hold_s = min(run.duration_s, cfg.straight_max_hold_s)
+            ends[key] = (run.position, sign * run.velocity, hold_s)
     return ends
 
 

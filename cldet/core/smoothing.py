@@ -193,6 +193,7 @@ class StraightRun:
     duration_s: float  # from the run's first detection to its last, s
     velocity: NDArray[np.float64]  # (3,) the constant velocity fitted to the run, m/s
     n: int  # detections in the run
+    position: NDArray[np.float64]  # (3,) the fitted line at the last detection's time, m
 
 
 def straight_run(
@@ -238,4 +239,6 @@ def straight_run(
     if not len(ok):
         return None
     k = int(ok[-1])
-    return StraightRun(duration_s=float(-tr[k]), velocity=velocity[k], n=k + 1)
+    # the line at the last detection's time (tr = 0): mean(z) - v * mean(t), relative to z[-1]
+    position = z[-1] + (s_z[k] - velocity[k] * s_t[k]) / n[k]
+    return StraightRun(duration_s=float(-tr[k]), velocity=velocity[k], n=k + 1, position=position)

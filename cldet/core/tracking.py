@@ -415,6 +415,12 @@ class CandidateTracker:
         """Largest edge of the box around a track's cluster detections, metres."""
         return self._hits[track_id].spread
 
+    def fewest_points(self, track_id: int) -> int:
+        """The fewest points in any of a track's cluster detections (0 when it has none)."""
+        hits = self._hits[track_id]
+        counts = [n for n, c in zip(hits.n_points, hits.clusters, strict=True) if c >= 0]
+        return min(counts, default=0)
+
     def last_hit(self, track_id: int) -> tuple[int, int, NDArray[np.float64], float]:
         """A track's latest detection: frame index, cluster index (-1: raw gate), position, NIS."""
         hits = self._hits[track_id]

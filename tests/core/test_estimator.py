@@ -20,6 +20,7 @@ from cldet.core.estimator import (
     FrameDetections,
     SequenceEstimate,
     TrackEstimator,
+    _Evidence,
     fuse_points,
 )
 from cldet.core.frames import pair_frames, valid_points
@@ -369,12 +370,13 @@ def test_a_sparse_far_structure_whose_returns_scatter_is_learned_not_protected()
         for k in range(80)
     ]
 
-    def hedge_foreground(min_moved_m: float) -> int:
-        cfg = load_config(overrides={"background": {"protect_min_moved_m": min_moved_m}})
-        dets, _ = estimate_sequence(frames, cfg)
+    def hedge_foreground(min_moved_m: float, dense_points: int) -> int:
+        bg = {"protect_min_moved_m": min_moved_m, "protect_dense_points": dense_points}
+        dets, _ = estimate_sequence(frames, load_config(overrides={"background": bg}))
         return sum(int(np.sum(d.foreground[:, 0] < -24.0)) for d in dets[10:70])
 
-    learned, protected = hedge_foreground(1.2), hedge_foreground(0.0)
+    # one point is "dense" too: every confirmed mover protected, the old rule
+    learned, protected = hedge_foreground(1.2, 3), hedge_foreground(0.0, 1)
     assert learned < 0.3 * protected, (learned, protected)
 
 
@@ -539,3 +541,48 @@ def test_a_straight_pass_seen_only_midway_is_extrapolated_along_its_line() -> No
 
     assert rms(0.4) < 1.0
     assert rms(0.0) > 3.0  # the rule is needed here (about 5 m without it)
+
+
+@pytest.mark.parametrize("n_points", [20, 1])
+def test_a_young_track_that_jumps_is_protected_only_when_its_clusters_are_dense(
+    n_points: int,
+) -> None:
+    # three detections, a gap (the object was hidden), then one 1.4 m away: its detections
+    # spread wider than a drone before a running mean exists. Twenty points in a compact ball
+    # are one object that moved: protected. One point each may be a larger thing lit in
+    # different places: not protected (the sparse-structure test above)
+    rng = np.random.default_rng(0)
+    empty = np.zeros((0, 3), np.float32)
+    a = np.array([7.0, 0.0, 1.0])
+    centres = {3: a, 4: a + [0.0, 0.1, 0.0], 5: a + [0.0, 0.2, 0.0], 9: a + [0.0, 1.4, 0.0]}
+
+    def protected_after_the_jump(dense_points: int) -> bool:
+        cfg = load_config(overrides={"background": {"protect_dense_points": dense_points}})
+        est = TrackEstimator(cfg)
+        for k in range(10):
+            c = centres.get(k)
+            pts = empty if c is None else c + rng.normal(0.0, 0.08, (n_points, 3))
+            est.register_frame(LidarFrame(k * 100_000_000, pts.astype(np.float32), empty))
+        (tid,) = est._tracker.active_ids().tolist()
+        assert est._tracker.spread(tid) > cfg.tracking.max_size_m
+        return est._protects(tid)
+
+    assert protected_after_the_jump(3) == (n_points >= 3)
+    assert not protected_after_the_jump(0)
+
+
+def test_a_flight_displaces_the_running_mean_where_scatter_only_widens_its_box() -> None:
+    # a far pole lit in different places each scan, seen for 30 s (0.6 m scatter per axis),
+    # against a drone that flew 3 m in 1 s and hovers: the box around the running means of the
+    # scatter grows past the protection threshold as the samples pile up (extreme values); the
+    # displacement from the first running mean to the latest does not
+    rng = np.random.default_rng(0)
+    pole, flight = _Evidence(), _Evidence()
+    for k in range(300):
+        t = 0.1 * k
+        pole.add(t, 1.0, rng.normal([28.0, 0.0, 5.0], 0.6), False)
+        at = np.array([10.0, 3.0 * min(t, 1.0), 4.0]) + rng.normal(0.0, 0.05, 3)
+        flight.add(t, 1.0, at, False)
+    threshold = load_config().background.protect_min_moved_m
+    assert pole.mean_moved > threshold > pole.displaced
+    assert flight.displaced > threshold

@@ -115,3 +115,7 @@ def test_straight_run_allows_for_the_smear_of_a_scan() -> None:
     assert no_smear is None or no_smear.duration_s < 1.0
     run = straight_run(t, z, max_rms_m=0.3, scan_s=0.1)
     assert run is not None and run.duration_s == pytest.approx(t[-1])
+    # where the run ends: the fitted line at the last detection's time lies far nearer the
+    # path than the last (smeared) detection does, so extrapolation starts from the line
+    end = t[-1] * v
+    assert np.linalg.norm(run.position - end) < 0.2 < np.linalg.norm(z[-1] - end)
