@@ -319,11 +319,21 @@ HEADER = (
 )
 
 
+SEEN_FEW = 0.1
+VISIBILITY = ("seen rarely", "seen")
+
+
+def _visibility(row: dict[str, Any]) -> str:
+    """The visibility group of a world: its drone seen (a point in a frame) rarely or not."""
+    return VISIBILITY[0] if row.get("seen", 1.0) < SEEN_FEW else VISIBILITY[1]
+
+
 def report(rows: list[dict[str, Any]], methods: Sequence[str], duration_s: float) -> None:
     """Print the overall, per-kind and per-site tables of every method."""
     from cldet.simulate import KINDS, SITES
 
     n_seq = len({r["seed"] for r in rows})
+    visible = [{**r, "visibility": _visibility(r)} for r in rows]
     print(f"\n{n_seq} randomised sequences of {duration_s} s; fail = RMS 3D error > {FAIL_RMS_M} m")
     print("MSE/coord = sum of squared errors / 3N over all truth rows (m^2); MSE 3D = / N (m^2)")
     print("seen = median fraction of frames with at least one point on the drone (either LiDAR)")
@@ -340,6 +350,11 @@ def report(rows: list[dict[str, Any]], methods: Sequence[str], duration_s: float
                   f"{np.median(cover):.3f} of the truth rows (min {min(cover):.3f})")  # fmt: skip
         print(f"{method}, by site\n{HEADER}")
         print("\n".join(table(rows, method, "site", SITES)[:-1]))
+        print(
+            f"{method}, by visibility (the drone's points in under {SEEN_FEW:.0%} of frames: a"
+            f" fast pass mostly out of reach or hidden, where most of the track is a guess)\n{HEADER}"
+        )
+        print("\n".join(table(visible, method, "visibility", VISIBILITY)[:-1]))  # fmt: skip
     times: dict[str, list[float]] = {}
     for r in rows:
         if r.get("seconds") is not None:
