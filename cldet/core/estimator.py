@@ -81,6 +81,7 @@ from cldet.core.tracking import (
     ClusterTable,
     TrackRecord,
     cross_section,
+    crowding,
 )
 from cldet.errors import FrameOrderError
 from cldet.stamps import NS_PER_S
@@ -295,7 +296,8 @@ class TrackEstimator:
         clusters = summarize_clusters(fg, labels, n_mid_fg)
         table = ClusterTable.from_clusters(clusters)
         if len(clusters):
-            table = replace(table, height=self._heights(clusters))
+            crowd = crowding(table.centroid, cfg.tracking.crowd_radius_m)
+            table = replace(table, height=self._heights(clusters), crowd=crowd)
         self._stamps.append(frame.stamp_ns)
         self._tables.append(table)
         t_s = (frame.stamp_ns - self._stamps[0]) / NS_PER_S + self._offset_s
@@ -373,6 +375,7 @@ class TrackEstimator:
                 np.array([tracker.last_hit(int(t))[3] for t in owner]),
                 cross_section(table.n_mid360, table.n_avia, table.centroid, tc),
                 tc,
+                table.crowds(),
             )
             both = (table.n_mid360 > 0) & (table.n_avia > 0)
             self._zones = {k: z for k, z in self._zones.items() if t_s - z[1] <= tc.max_miss_s}
@@ -423,27 +426,27 @@ class TrackEstimator:
         return keep
 
     def _protects(self, track_id: int) -> bool:
-        """Whether a confirmed mover is protected: its detections still lie within a drone's
-        size (``max_size_m``: a hover, sparse returns from one small body), or their running
-        mean now lies ``background.protect_min_moved_m`` or more from the first one (a flight;
-        the box around all the means would grow with a long life's scatter alone), or, before
-        a running mean exists, every cluster detection had ``background.protect_dense_points``
-        or more (one compact object that jumped, say after being hidden). A track whose
-        detections scatter wider while their mean stays is a larger static thing lit in
-        different places each scan (a far hedge, a pole, a swaying edge): it is learned."""
+        """Whether a confirmed mover is protected: its running mean now lies
+        ``background.protect_min_moved_m`` or more from the first one (a flight; the box around
+        all the means would grow with a long life's scatter alone); or its clusters are dense
+        (a median of ``background.protect_dense_points`` points or more) and either its
+        detections still lie within a drone's size (``max_size_m``: a hover) or it is too
+        young for a running mean (one compact object that jumped, say after being hidden).
+        Sparse returns cannot tell a small body from a larger thing lit in different places
+        each scan (a far hedge, a pole, a swaying edge): their centroids scatter within a
+        drone's size for a while, and wider while their mean stays; such tracks are learned."""
         tracker = self._tracker
         if not tracker.is_confirmed_mover(track_id):
             return False
-        if tracker.spread(track_id) <= self.config.tracking.max_size_m:
-            return True
         bc = self.config.background
         ev = self._evidence.get(track_id)
-        if ev is None or ev.means == 0:
-            # too young for a running mean: a centroid jumps by more than a drone's size
-            # across sparse returns of a larger thing, not across dense compact clusters
-            dense = bc.protect_dense_points
-            return 0 < dense <= tracker.fewest_points(track_id)
-        return ev.displaced >= bc.protect_min_moved_m
+        if ev is not None and ev.means and ev.displaced >= bc.protect_min_moved_m:
+            return True
+        dense = bc.protect_dense_points
+        compact = dense == 0 or tracker.median_points(track_id) >= dense
+        if tracker.spread(track_id) <= self.config.tracking.max_size_m:
+            return compact
+        return dense > 0 and compact and (ev is None or ev.means == 0)
 
     def _reclaim(self, pts: NDArray[np.float32], labels: NDArray[np.uint8]) -> None:
         """Points background only through dilation (MARGIN) near a protected mover's last place

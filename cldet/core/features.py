@@ -93,6 +93,7 @@ class TrackDetections:
     n_mid360: NDArray[np.int64]  # (H,) raw-gate points are counted as the sparser Mid-360's
     n_avia: NDArray[np.int64]  # (H,)
     cross: F64  # (H,) cross-section, m^2
+    crowd: NDArray[np.int64]  # (H,) other clusters near the detection's (0 for raw-gate ones)
 
     @property
     def both(self) -> NDArray[np.bool_]:
@@ -110,14 +111,16 @@ def track_detections(
     height = np.full(h, np.nan)
     n_mid = rec.n_points.copy()
     n_avia = np.zeros(h, dtype=np.int64)
+    crowd = np.zeros(h, dtype=np.int64)
     for k in np.flatnonzero(~rec.raw):
         table, c = tables[rec.frames[k]], rec.clusters[k]
         extent[k] = table.extent[c]
         size[k] = table.sizes()[c]
         height[k] = table.heights()[c]
         n_mid[k], n_avia[k] = table.n_mid360[c], table.n_avia[c]
+        crowd[k] = table.crowds()[c]
     cross = cross_section(n_mid, n_avia, rec.positions, cfg)
-    return TrackDetections(extent, size, height, n_mid, n_avia, cross)
+    return TrackDetections(extent, size, height, n_mid, n_avia, cross, crowd)
 
 
 def _nanmedian(x: F64) -> float:

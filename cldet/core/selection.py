@@ -39,6 +39,10 @@ each detection weighted by per-detection evidence and the track's factors:
 * motion consistency: a detection whose NIS exceeds 7.81 (the 95 % point of chi^2, 3 dof)
   weighs exp(-(NIS - 7.81) / 7.81): smooth motion keeps its weight, erratic speckle or a
   bird's jinks lose it;
+* crowding: a detection with k other clusters of its frame within ``crowd_radius_m`` (3 m,
+  the tracker's hard gate) weighs 1 / (1 + k): among rain, speckle or flickering foliage any
+  track finds some return to continue on by chance, so such a detection says little about one
+  object persisting (a drone alone in the sky keeps its full weight);
 * sensors: factor 1 + 0.5 f, f = fraction of detections seen by both LiDARs in one cluster.
 
 A track's first detection does not count (anything can start a track: persistence is what
@@ -133,6 +137,7 @@ def detection_weights(
     nis: NDArray[np.float64],
     cross: NDArray[np.float64],
     cfg: TrackingConfig,
+    crowd: NDArray[np.int64] | None = None,
 ) -> NDArray[np.float64]:
     """Per-detection evidence: size, height above the local ground, raw gate, motion
     consistency, cross-section.
@@ -153,7 +158,11 @@ def detection_weights(
     # motion consistency: a detection far outside the constant-velocity prediction
     # (NIS above the 95 % point of chi^2 with 3 dof) is down-weighted smoothly
     nis0 = np.nan_to_num(nis, nan=0.0)
-    return per_det * np.exp(-np.maximum(nis0 - _NIS95, 0.0) / _NIS95)
+    per_det = per_det * np.exp(-np.maximum(nis0 - _NIS95, 0.0) / _NIS95)
+    if crowd is not None:
+        # k other clusters within reach: any track continues on one of them by chance
+        per_det = per_det / (1.0 + crowd)
+    return per_det
 
 
 TrackScorer = Callable[[NDArray[np.float64]], NDArray[np.float64]]
@@ -179,7 +188,9 @@ def score_tracks(
         if len(rec.frames) < MIN_TRACK_HITS:
             continue
         det = track_detections(rec, tables, cfg)
-        per_det = detection_weights(det.extent, det.height, rec.raw, rec.nis, det.cross, cfg)
+        per_det = detection_weights(
+            det.extent, det.height, rec.raw, rec.nis, det.cross, cfg, det.crowd
+        )
         kept.append((rec, det, per_det))
     factors = np.array([_hand_factor(r, d, times_s, cfg) for r, d, _ in kept])
     if scorer is not None and kept:

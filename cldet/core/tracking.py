@@ -43,6 +43,7 @@ __all__ = [
     "ClusterTable",
     "TrackRecord",
     "constant_velocity_fit",
+    "crowding",
     "cross_section",
 ]
 
@@ -62,6 +63,11 @@ class ClusterTable:
         None  # (K,) lowest point above local ground, m; NaN unknown
     )
     size: NDArray[np.float64] | None = None  # (K,3) box edges along x, y, z, metres
+    crowd: NDArray[np.int64] | None = None  # (K,) other clusters within the crowd radius
+
+    def crowds(self) -> NDArray[np.int64]:
+        """(K,) how many other clusters of the frame lie near each one (0: not counted)."""
+        return np.zeros(len(self), dtype=np.int64) if self.crowd is None else self.crowd
 
     def sizes(self) -> NDArray[np.float64]:
         """(K,3) each cluster's box edges (x, y, z), metres (NaN: unknown)."""
@@ -90,6 +96,14 @@ class ClusterTable:
 
     def __len__(self) -> int:
         return len(self.n_points)
+
+
+def crowding(centroid: NDArray[np.float64], radius_m: float) -> NDArray[np.int64]:
+    """(K,) how many other centroids of (K,3) lie within ``radius_m`` of each."""
+    if len(centroid) < 2 or radius_m <= 0:
+        return np.zeros(len(centroid), dtype=np.int64)
+    tree = cKDTree(centroid)
+    return np.asarray(tree.query_ball_point(centroid, radius_m, return_length=True)) - 1
 
 
 @dataclass(frozen=True)
@@ -415,11 +429,11 @@ class CandidateTracker:
         """Largest edge of the box around a track's cluster detections, metres."""
         return self._hits[track_id].spread
 
-    def fewest_points(self, track_id: int) -> int:
-        """The fewest points in any of a track's cluster detections (0 when it has none)."""
+    def median_points(self, track_id: int) -> float:
+        """The median count of points in a track's cluster detections (0 when it has none)."""
         hits = self._hits[track_id]
         counts = [n for n, c in zip(hits.n_points, hits.clusters, strict=True) if c >= 0]
-        return min(counts, default=0)
+        return float(np.median(counts)) if counts else 0.0
 
     def last_hit(self, track_id: int) -> tuple[int, int, NDArray[np.float64], float]:
         """A track's latest detection: frame index, cluster index (-1: raw gate), position, NIS."""
