@@ -32,6 +32,9 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    ``tracking.causal_judge_s``, from when on it is judged static or rigidly fixed: for its
    first second a still object, say a sign overhead, looks like a drone that just arrived);
    the estimate is that track's filtered state moved back from the points' time to the stamp.
+   When the followed track is lost and no other is chosen, the estimate carries its motion on
+   as the refinement extrapolates a track's end, from the past alone (``_coast_from``): along
+   the line of a straight run that ended it, else from its last state, the velocity decaying.
 
 ``refine``: the candidate tracks plus the constant-velocity lines of sparse fast movers
 (``cldet.core.lines``, track-before-detect); the drone's chain of tracks chosen by
@@ -164,6 +167,17 @@ def check_order(last_ns: int | None, stamp_ns: int) -> None:
         )
 
 
+@dataclass(frozen=True)
+class _Coast:
+    """Where the causal estimate coasts from once the followed track is lost."""
+
+    t_s: float  # observation time of ``origin``, s from the first stamp
+    origin: NDArray[np.float64]  # (3,)
+    velocity: NDArray[np.float64]  # (3,) m/s, held ``hold_s`` then decaying
+    hold_s: float
+    sigma_m: float  # the last followed estimate's 1-sigma
+
+
 @dataclass
 class _Evidence:
     """A candidate track's running evidence for the causal choice."""
@@ -265,6 +279,10 @@ class TrackEstimator:
         self._times = np.zeros(1024)  # observation time of each frame, s from the first stamp
         self._evidence: dict[int, _Evidence] = {}
         self._choice: int | None = None  # causal: the track followed
+        # the followed track's filtered state at the last frame it was followed (obs time s,
+        # position, velocity), and, once it is lost, where the causal estimate coasts from
+        self._state: tuple[float, NDArray[np.float64], NDArray[np.float64]] | None = None
+        self._coast: _Coast | None = None
         self._causal: list[Estimate] = []
         # where protected movers were last seen: (position (3,), time s); a cluster there is
         # protected too (a hovering drone's track may end and restart without moving again)
@@ -505,10 +523,18 @@ class TrackEstimator:
             best = self._choice if self._choice in row else None
         if best is not None and best == self._choice:
             best = self._hand_over(best, row, active, index, seen_now)
+        if best is None and self._choice is not None:
+            self._coast = self._coast_from(self._choice, index)
         self._choice = best
         if best is None:
-            return self._hold(stamp_ns)
+            return self._hold(stamp_ns, index)
         i = row[best]
+        self._coast = None
+        self._state = (
+            float(self._times[index]),
+            active.position[i].copy(),
+            active.velocity[i].copy(),
+        )
         pos = active.position[i] - active.velocity[i] * self._offset_s
         f, c, _, _ = self._tracker.last_hit(best)
         seen = f == index
@@ -553,8 +579,46 @@ class TrackEstimator:
                 best, best_d2 = tid, d2
         return best
 
-    def _hold(self, stamp_ns: int) -> Estimate:
-        """No track to follow: the last causal estimate held, or the fallback position."""
+    def _coast_from(self, track_id: int, index: int) -> _Coast | None:
+        """Where the causal estimate goes on from when the followed track is lost: as the
+        refinement extrapolates a track's end (``_extrapolation_ends``), from its past alone:
+        the line of a straight run that ends it, held as long as the run lasted, else its last
+        filtered state."""
+        if self._state is None or not self._causal:
+            return None
+        t_state, position, velocity = self._state
+        sigma_m = self._causal[-1].sigma_m
+        rec = self._tracker.record(track_id)
+        if rec is not None:
+            t = self._times[rec.frames]
+            scan_s = float(self._times[index] - self._times[index - 1]) if index else 0.0
+            origin, v, hold_s = _extrapolation_ends(
+                t,
+                rec.positions,
+                position[None, :],
+                velocity[None, :],
+                scan_s,
+                self.config.smoothing,
+            )[-1]
+            if hold_s > 0.0:  # a straight run: from its line at its last detection
+                return _Coast(float(t[-1]), origin, v, hold_s, sigma_m)
+        return _Coast(t_state, position, velocity, 0.0, sigma_m)
+
+    def _hold(self, stamp_ns: int, index: int) -> Estimate:
+        """No track to follow: the lost track's motion carried on (``_coast_from``, its velocity
+        decaying as the refinement's extrapolation does), else the last causal estimate held,
+        else the fallback position."""
+        c = self._coast
+        if c is not None:
+            sc = self.config.smoothing
+            dt = float(self._times[index]) - self._offset_s - c.t_s  # to the stamp's time
+            pos, var = extrapolate(
+                c.origin, c.velocity, np.zeros((2, 2)), dt, sc.accel_psd, sc.extrapolation_tau_s,
+                c.hold_s,
+            )  # fmt: skip
+            pos = apply_bias(pos[None, :], self.config.bias)[0]
+            sigma = float(np.hypot(c.sigma_m, np.sqrt(max(var, 0.0))))
+            return Estimate(stamp_ns, pos, Source.PREDICTED, 0, sigma)
         if self._causal and self._causal[-1].source != Source.FALLBACK:
             last = self._causal[-1]
             dt = (stamp_ns - last.stamp_ns) / NS_PER_S

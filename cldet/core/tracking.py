@@ -455,6 +455,16 @@ class CandidateTracker:
         if len(hits.frames) >= MIN_TRACK_HITS:
             self._ended.append(_to_record(track_id, hits))
 
+    def record(self, track_id: int) -> TrackRecord | None:
+        """One track's detections so far (active or ended; None: unknown or a lone detection)."""
+        hits = self._hits.get(track_id)
+        if hits is not None:
+            return _to_record(track_id, hits) if len(hits.frames) >= MIN_TRACK_HITS else None
+        for rec in reversed(self._ended):  # the followed track ended recently
+            if rec.track_id == track_id:
+                return rec
+        return None
+
     def records(self) -> list[TrackRecord]:
         """Every candidate track so far (ended or active) of at least ``MIN_TRACK_HITS``
         detections, by track id. A lone detection is no track: nothing scores it."""

@@ -521,14 +521,15 @@ def test_the_causal_estimate_waits_for_confirmation() -> None:
 def test_a_straight_pass_seen_only_midway_is_extrapolated_along_its_line() -> None:
     # a drone crossing at 15 m/s, 15-27 m out, returns points only in scans 25-55 of 80 (out
     # of range or hidden before and after); it flew straight while seen, so inertia carries it
-    # on along that line for about as long, where a decaying velocity stops it short
+    # on along that line for about as long, where a decaying velocity stops it short. The
+    # causal estimate, once the track is lost, carries it on the same way from its past alone
     def drone(k: int) -> np.ndarray:
         return np.array([15.0, -60.0 + 1.5 * k, 4.0])
 
     frames = _with_objects(0, 80, lambda k: [(tuple(drone(k)), 0.25)] if 25 <= k <= 55 else [])
     truth = np.array([drone(k) for k in range(80)])
 
-    def rms(straight_rms_m: float) -> float:
+    def rms(straight_rms_m: float) -> tuple[float, float]:
         cfg = load_config(
             overrides={
                 "smoothing": {"straight_rms_m": straight_rms_m},
@@ -537,10 +538,17 @@ def test_a_straight_pass_seen_only_midway_is_extrapolated_along_its_line() -> No
         )
         _, result = estimate_sequence(frames, cfg)
         assert sum(e.source == Source.DETECTED for e in result.estimates) >= 25
-        return _rms(np.array([e.position for e in result.estimates]) - truth)
+        causal = np.array([e.position for e in result.causal[56:]])
+        assert all(e.source == Source.PREDICTED for e in result.causal[56:])
+        return (
+            _rms(np.array([e.position for e in result.estimates]) - truth),
+            _rms(causal - truth[56:]),
+        )
 
-    assert rms(0.4) < 1.0
-    assert rms(0.0) > 3.0  # the rule is needed here (about 5 m without it)
+    refined, causal = rms(0.4)
+    assert refined < 1.0 and causal < 0.6
+    refined, causal = rms(0.0)  # the rule is needed here (about 5 m and 1.3 m without it)
+    assert refined > 3.0 and causal > 1.0
 
 
 @pytest.mark.parametrize("n_points", [20, 1])
