@@ -265,9 +265,10 @@ class TrackingConfig(BaseModel):
     crowd_radius_m: float = Field(
         default=3.0,
         ge=0,
-        description="a detection with k other clusters of its frame within this radius weighs"
-        " 1 / (1 + k): among rain, speckle or flickering foliage any track finds a cluster to"
-        " continue on by chance, so such a detection is weak evidence of one object (0: off)",
+        description="a detection with k other clusters of its frame within this radius, each"
+        " with at least half its points, weighs 1 / (1 + k): among rain, speckle or flickering"
+        " foliage any track finds a return to continue on by chance, so such a detection is"
+        " weak evidence of one object; none of them imitates a dense cluster (0: off)",
     )
     min_height_m: float = Field(
         default=2.0, description="clusters reaching lower than this above ground: unlikely"

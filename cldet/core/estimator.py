@@ -314,7 +314,7 @@ class TrackEstimator:
         clusters = summarize_clusters(fg, labels, n_mid_fg)
         table = ClusterTable.from_clusters(clusters)
         if len(clusters):
-            crowd = crowding(table.centroid, cfg.tracking.crowd_radius_m)
+            crowd = crowding(table.centroid, table.n_points, cfg.tracking.crowd_radius_m)
             table = replace(table, height=self._heights(clusters), crowd=crowd)
         self._stamps.append(frame.stamp_ns)
         self._tables.append(table)

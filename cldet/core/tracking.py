@@ -98,12 +98,22 @@ class ClusterTable:
         return len(self.n_points)
 
 
-def crowding(centroid: NDArray[np.float64], radius_m: float) -> NDArray[np.int64]:
-    """(K,) how many other centroids of (K,3) lie within ``radius_m`` of each."""
-    if len(centroid) < 2 or radius_m <= 0:
-        return np.zeros(len(centroid), dtype=np.int64)
-    tree = cKDTree(centroid)
-    return np.asarray(tree.query_ball_point(centroid, radius_m, return_length=True)) - 1
+def crowding(
+    centroid: NDArray[np.float64], n_points: NDArray[np.int64], radius_m: float
+) -> NDArray[np.int64]:
+    """(K,) how many other clusters of (K,3) centroids lie within ``radius_m`` of each and have
+    at least half its points: what a track there could continue on by chance instead (single
+    rain returns are alike; none of them imitates a drone's ten-point cluster)."""
+    k = len(centroid)
+    if k < 2 or radius_m <= 0:
+        return np.zeros(k, dtype=np.int64)
+    pairs = cKDTree(centroid).query_pairs(radius_m, output_type="ndarray")
+    if len(pairs) == 0:
+        return np.zeros(k, dtype=np.int64)
+    i, j = pairs[:, 0], pairs[:, 1]
+    ni, nj = n_points[i], n_points[j]
+    count = np.bincount(i[2 * nj >= ni], minlength=k) + np.bincount(j[2 * ni >= nj], minlength=k)
+    return count.astype(np.int64)
 
 
 @dataclass(frozen=True)
