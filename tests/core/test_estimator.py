@@ -551,6 +551,25 @@ def test_a_straight_pass_seen_only_midway_is_extrapolated_along_its_line() -> No
     assert refined > 3.0 and causal > 1.0
 
 
+def _protection(
+    centres: dict[int, np.ndarray], n_points: int, dense_points: int
+) -> tuple[float, bool]:
+    """A ball of ``n_points`` returns (8 cm spread) at each frame's centre, nothing in the other
+    frames (of 0.1 s) up to the last centre's: the one track's spread and whether it is
+    protected, with ``background.protect_dense_points`` = ``dense_points``."""
+    rng = np.random.default_rng(0)
+    empty = np.zeros((0, 3), np.float32)
+    cfg = load_config(overrides={"background": {"protect_dense_points": dense_points}})
+    est = TrackEstimator(cfg)
+    for k in range(max(centres) + 1):
+        c = centres.get(k)
+        pts = empty if c is None else c + rng.normal(0.0, 0.08, (n_points, 3))
+        est.register_frame(LidarFrame(k * 100_000_000, pts.astype(np.float32), empty))
+    (tid,) = est._tracker.active_ids().tolist()
+    assert est._tracker.is_confirmed_mover(tid)
+    return est._tracker.spread(tid), est._protects(tid)
+
+
 @pytest.mark.parametrize("n_points", [20, 1])
 def test_a_young_track_that_jumps_is_protected_only_when_its_clusters_are_dense(
     n_points: int,
@@ -559,24 +578,12 @@ def test_a_young_track_that_jumps_is_protected_only_when_its_clusters_are_dense(
     # spread wider than a drone before a running mean exists. Twenty points in a compact ball
     # are one object that moved: protected. One point each may be a larger thing lit in
     # different places: not protected (the sparse-structure test above)
-    rng = np.random.default_rng(0)
-    empty = np.zeros((0, 3), np.float32)
     a = np.array([7.0, 0.0, 1.0])
     centres = {3: a, 4: a + [0.0, 0.1, 0.0], 5: a + [0.0, 0.2, 0.0], 9: a + [0.0, 1.4, 0.0]}
-
-    def protected_after_the_jump(dense_points: int) -> bool:
-        cfg = load_config(overrides={"background": {"protect_dense_points": dense_points}})
-        est = TrackEstimator(cfg)
-        for k in range(10):
-            c = centres.get(k)
-            pts = empty if c is None else c + rng.normal(0.0, 0.08, (n_points, 3))
-            est.register_frame(LidarFrame(k * 100_000_000, pts.astype(np.float32), empty))
-        (tid,) = est._tracker.active_ids().tolist()
-        assert est._tracker.spread(tid) > cfg.tracking.max_size_m
-        return est._protects(tid)
-
-    assert protected_after_the_jump(3) == (n_points >= 3)
-    assert not protected_after_the_jump(0)
+    spread, protected = _protection(centres, n_points, 3)
+    assert spread > load_config().tracking.max_size_m
+    assert protected == (n_points >= 3)
+    assert not _protection(centres, n_points, 0)[1]
 
 
 def test_a_flight_displaces_the_running_mean_where_scatter_only_widens_its_box() -> None:
@@ -603,32 +610,12 @@ def test_a_still_track_is_protected_as_a_hover_only_when_its_clusters_are_dense(
     # a track whose detections stay within a drone's size: a compact cluster of twenty points
     # is one small body hovering (protected); single returns there are as likely a larger
     # thing lit in different places each scan (a far pole, a swaying canopy edge: learned)
-    rng = np.random.default_rng(0)
-    empty = np.zeros((0, 3), np.float32)
-    centre = np.array([7.0, 0.0, 1.0])
-    frames = [LidarFrame(k * 100_000_000, empty, empty) for k in range(3)] + [
-        LidarFrame(
-            k * 100_000_000,
-            (centre + rng.uniform(-0.3, 0.3, 3) + rng.normal(0.0, 0.08, (n_points, 3))).astype(
-                np.float32
-            ),
-            empty,
-        )
-        for k in range(3, 12)
-    ]
-
-    def protected(dense_points: int) -> bool:
-        cfg = load_config(overrides={"background": {"protect_dense_points": dense_points}})
-        est = TrackEstimator(cfg)
-        for frame in frames:
-            est.register_frame(frame)
-        (tid,) = est._tracker.active_ids().tolist()
-        assert est._tracker.is_confirmed_mover(tid)
-        assert est._tracker.spread(tid) <= cfg.tracking.max_size_m
-        return est._protects(tid)
-
-    assert protected(3) == (n_points >= 3)
-    assert protected(0)
+    rng = np.random.default_rng(1)
+    centres = {k: np.array([7.0, 0.0, 1.0]) + rng.uniform(-0.3, 0.3, 3) for k in range(3, 12)}
+    spread, protected = _protection(centres, n_points, 3)
+    assert spread <= load_config().tracking.max_size_m
+    assert protected == (n_points >= 3)
+    assert _protection(centres, n_points, 0)[1]
 
 
 def _rain(rng: np.random.Generator, n: int) -> np.ndarray:
