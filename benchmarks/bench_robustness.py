@@ -16,7 +16,8 @@ Methods: ``track-causal`` (the causal per-frame estimate of ``track``, ``est.cau
 when the estimator does not give one; scored from its first estimate on, after the background's
 warm-up, with the share of truth rows that leaves printed as its coverage), ``track`` (the refined track) and ``cl-det`` (the
 report's baseline). A sequence fails when its RMS 3D error at the truth stamps exceeds 1 m.
-Printed per method, overall, per scenario kind and per site: sequences, failures with a 95 %
+Printed per method, overall, per scenario kind, per site and by visibility (the drone
+returning a point in under 10 % of frames, or not): sequences, failures with a 95 %
 Wilson interval, MSE per coordinate (sum of squared errors / 3N over all truth rows), mean
 squared 3D distance (sum / N), median and worst RMS, and "seen": the median fraction of frames
 with at least one point on the drone (fast passes and high hovers are sparse by design).
@@ -329,7 +330,7 @@ def _visibility(row: dict[str, Any]) -> str:
 
 
 def report(rows: list[dict[str, Any]], methods: Sequence[str], duration_s: float) -> None:
-    """Print the overall, per-kind and per-site tables of every method."""
+    """Print the overall, per-kind, per-site and visibility tables of every method."""
     from cldet.simulate import KINDS, SITES
 
     n_seq = len({r["seed"] for r in rows})

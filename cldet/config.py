@@ -157,10 +157,11 @@ class BackgroundConfig(BaseModel):
     protect_dense_points: int = Field(
         default=3,
         ge=0,
-        description="... and, before the running mean exists, while every cluster detection"
-        " had at least this many points: a centroid scatters by metres only when it rests on a"
-        " few returns of a larger thing; a dense compact cluster that jumps is one object moving"
-        " (0: off)",
+        description="... and, short of that, a track's cluster detections need a median of at"
+        " least this many points to be protected as a hover within a drone's size or, too young"
+        " for a running mean, as a compact object that jumped: single returns cannot tell a"
+        " small body from a larger thing lit in different places each scan (0: every hover"
+        " within a drone's size protected, no young jumps)",
     )
 
 
@@ -266,7 +267,7 @@ class TrackingConfig(BaseModel):
         default=3.0,
         ge=0,
         description="a detection with k other clusters of its frame within this radius, each"
-        " with at least half its points, weighs 1 / (1 + k): among rain, speckle or flickering"
+        " with a point count within a factor of two of its own, weighs 1 / (1 + k): among rain, speckle or flickering"
         " foliage any track finds a return to continue on by chance, so such a detection is"
         " weak evidence of one object; none of them imitates a dense cluster (0: off)",
     )

@@ -21,10 +21,11 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    time its points were taken (the stamp plus ``frames.scan_offset_s``, the middle of the
    scan); a confirmed moving track that gets no cluster continues on the raw points near its
    prediction; the points of confirmed small moving tracks are withheld from the background
-   (``background.protect_tracks``), so a drone that stops to hover is not learned: while their
-   detections lie within a drone's size, once their half-second mean lies
-   ``background.protect_min_moved_m`` from its first value, or, younger, while their clusters
-   are dense (``_protects``);
+   (``background.protect_tracks``), so a drone that stops to hover is not learned: once their
+   half-second mean lies ``background.protect_min_moved_m`` from its first value, or while
+   their clusters are dense (``background.protect_dense_points``) and either their
+   detections lie within a drone's size or the track is too young for a running mean
+   (``_protects``);
 5. the causal choice: the active track with the highest running evidence (the per-detection
    weights of ``cldet.core.selection``, times its static and speed factors so far; a challenger
    must beat the current choice by ``_SWITCH_RATIO``; no track is reported before one has
@@ -33,8 +34,9 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    first second a still object, say a sign overhead, looks like a drone that just arrived);
    the estimate is that track's filtered state moved back from the points' time to the stamp.
    When the followed track is lost and no other is chosen, the estimate carries its motion on
-   as the refinement extrapolates a track's end, from the past alone (``_coast_from``): along
-   the line of a straight run that ended it, else from its last state, the velocity decaying.
+   from the past alone (``_coast_from``): along the line of a straight run that ended it, held
+   as long as the run lasted, as the refinement does; else from the track's last state (the
+   tracker predicted it at constant velocity until it ended), the velocity decaying from then.
 
 ``refine``: the candidate tracks plus the constant-velocity lines of sparse fast movers
 (``cldet.core.lines``, track-before-detect); the drone's chain of tracks chosen by
@@ -461,10 +463,10 @@ class TrackEstimator:
         if ev is not None and ev.means and ev.displaced >= bc.protect_min_moved_m:
             return True
         dense = bc.protect_dense_points
-        compact = dense == 0 or tracker.median_points(track_id) >= dense
-        if tracker.spread(track_id) <= self.config.tracking.max_size_m:
-            return compact
-        return dense > 0 and compact and (ev is None or ev.means == 0)
+        young = ev is None or ev.means == 0
+        if tracker.spread(track_id) > self.config.tracking.max_size_m and (dense == 0 or not young):
+            return False  # scattered wider than a drone, and not a young dense track
+        return dense == 0 or tracker.median_points(track_id) >= dense
 
     def _reclaim(self, pts: NDArray[np.float32], labels: NDArray[np.uint8]) -> None:
         """Points background only through dilation (MARGIN) near a protected mover's last place
@@ -580,10 +582,11 @@ class TrackEstimator:
         return best
 
     def _coast_from(self, track_id: int, index: int) -> _Coast | None:
-        """Where the causal estimate goes on from when the followed track is lost: as the
-        refinement extrapolates a track's end (``_extrapolation_ends``), from its past alone:
-        the line of a straight run that ends it, held as long as the run lasted, else its last
-        filtered state."""
+        """Where the causal estimate goes on from when the followed track is lost, from its
+        past alone: the line of a straight run that ends it, held as long as the run lasted
+        (as the refinement extrapolates a track's end, ``_extrapolation_ends``), else its last
+        filtered state (already predicted at constant velocity through the misses before the
+        tracker ended it, so the decay starts later than the refinement's would)."""
         if self._state is None or not self._causal:
             return None
         t_state, position, velocity = self._state

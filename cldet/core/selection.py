@@ -40,10 +40,12 @@ each detection weighted by per-detection evidence and the track's factors:
   weighs exp(-(NIS - 7.81) / 7.81): smooth motion keeps its weight, erratic speckle or a
   bird's jinks lose it;
 * crowding: a detection with k other clusters of its frame within ``crowd_radius_m`` (3 m,
-  the tracker's hard gate), each with at least half its points, weighs 1 / (1 + k): among
+  as far as the tracker's default hard gate), each with a point count within a factor of two
+  of its own, weighs 1 / (1 + k): among
   rain, speckle or flickering foliage any track finds some return to continue on by chance,
   so such a detection says little about one object persisting (a drone alone in the sky keeps
-  its full weight, and single rain returns do not crowd a drone's dense cluster);
+  its full weight; single rain returns do not crowd a drone's dense cluster, nor does a wall's
+  or a person's far larger one);
 * sensors: factor 1 + 0.5 f, f = fraction of detections seen by both LiDARs in one cluster.
 
 A track's first detection does not count (anything can start a track: persistence is what

@@ -25,6 +25,7 @@ covariance is one 2x2 (see ``cldet.core.smoothing``).
 
 from __future__ import annotations
 
+from bisect import insort
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -101,9 +102,10 @@ class ClusterTable:
 def crowding(
     centroid: NDArray[np.float64], n_points: NDArray[np.int64], radius_m: float
 ) -> NDArray[np.int64]:
-    """(K,) how many other clusters of (K,3) centroids lie within ``radius_m`` of each and have
-    at least half its points: what a track there could continue on by chance instead (single
-    rain returns are alike; none of them imitates a drone's ten-point cluster)."""
+    """(K,) how many other clusters of (K,3) centroids lie within ``radius_m`` of each with a
+    point count within a factor of two of its own: what a track there could continue on by
+    chance instead (single rain returns are alike; none of them imitates a drone's ten-point
+    cluster, and a wall's or a person's hundred points are not mistaken for it either)."""
     k = len(centroid)
     if k < 2 or radius_m <= 0:
         return np.zeros(k, dtype=np.int64)
@@ -112,7 +114,8 @@ def crowding(
         return np.zeros(k, dtype=np.int64)
     i, j = pairs[:, 0], pairs[:, 1]
     ni, nj = n_points[i], n_points[j]
-    count = np.bincount(i[2 * nj >= ni], minlength=k) + np.bincount(j[2 * ni >= nj], minlength=k)
+    alike = (2 * nj >= ni) & (2 * ni >= nj)  # within a factor of two either way
+    count = np.bincount(i[alike], minlength=k) + np.bincount(j[alike], minlength=k)
     return count.astype(np.int64)
 
 
@@ -185,6 +188,7 @@ class _Hits:
     lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
     upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
     spread: float = 0.0  # largest edge of the box around its cluster detections, metres
+    cluster_points: list[int] = field(default_factory=list)  # its clusters' sizes, sorted
 
     def add(
         self,
@@ -203,6 +207,7 @@ class _Hits:
         self.nis.append(nis)
         self.speed.append(speed)
         if cluster >= 0:
+            insort(self.cluster_points, n)
             self.n_cluster_hits += 1
             self.last_extent = extent
             np.minimum(self.lower, pos, out=self.lower)
@@ -441,9 +446,11 @@ class CandidateTracker:
 
     def median_points(self, track_id: int) -> float:
         """The median count of points in a track's cluster detections (0 when it has none)."""
-        hits = self._hits[track_id]
-        counts = [n for n, c in zip(hits.n_points, hits.clusters, strict=True) if c >= 0]
-        return float(np.median(counts)) if counts else 0.0
+        counts = self._hits[track_id].cluster_points  # sorted as they come: O(1) here
+        h = len(counts)
+        if not h:
+            return 0.0
+        return float(counts[h // 2]) if h % 2 else 0.5 * (counts[h // 2 - 1] + counts[h // 2])
 
     def last_hit(self, track_id: int) -> tuple[int, int, NDArray[np.float64], float]:
         """A track's latest detection: frame index, cluster index (-1: raw gate), position, NIS."""
