@@ -227,6 +227,13 @@ class TrackingConfig(BaseModel):
         " median for a second or more is rigidly fixed structure: a hovering drone wanders"
         " more (0: off)",
     )
+    prior_scorer: bool = Field(
+        default=True,
+        description="the refinement re-weighs the hand-set track factors by the drone"
+        " probability of the scorer learned on the simulator's randomised development worlds"
+        " (cldet/core/prior.py; a --model's own scorer replaces it); false: hand-set factors"
+        " alone",
+    )
     fixed_factor: float = Field(
         default=0.01,
         gt=0,
@@ -389,6 +396,22 @@ class SmoothingConfig(BaseModel):
         default=10.0,
         ge=0,
         description="the longest a straight run's velocity is held beyond the detections, s",
+    )
+    unseen_check_s: float = Field(
+        default=1.0,
+        ge=0,
+        description="negative evidence: a track's motion is carried on beyond its detections only"
+        " if, over this long, the drone could have gone undetected that way (out of the field,"
+        " behind static structure, or too sparse to be sure of); otherwise, where the static"
+        " scene at that end could hide a drone (it stopped and was learned, or it came out of a"
+        " hover), the position is held instead (0: off)",
+    )
+    unseen_confidence: float = Field(
+        default=0.95,
+        gt=0,
+        lt=1,
+        description="... 'could not have gone undetected': the chance of at least one detection"
+        " along the carried-on path, from the track's own detection rate near that end",
     )
 
 

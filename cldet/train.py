@@ -67,6 +67,8 @@ __all__ = [
     "collect_sequence",
     "cross_validate",
     "fit_model",
+    "fit_track_scorer",
+    "label_candidates",
     "train_logs",
 ]
 
@@ -179,7 +181,20 @@ def collect_sequence(
     for frame in read_frames(log, sensors, config.frames):
         estimator.register_frame(frame)
         progress.advance()
-    cand = estimator.candidates()
+    return label_candidates(log, estimator.candidates(), truth_ns, truth_xyz, class_id, config)
+
+
+def label_candidates(
+    log: Path,
+    cand: Candidates,
+    truth_ns: NDArray[np.int64],
+    truth_xyz: NDArray[np.float64],
+    class_id: int | None,
+    config: CldetConfig,
+) -> SequenceSample:
+    """One sequence's candidate tracks (from the per-frame pass with ``config``), matched to
+    its truth (``truth_ns`` (G,) sorted, ``truth_xyz`` (G,3)): features, labels, the drone
+    tracks' detections and prefixes (see the module docstring). ``log`` names the sequence."""
     offset_ns = int(round(config.frames.scan_offset_s * NS_PER_S))
     sample = SequenceSample(log, cand, truth_ns, truth_xyz, class_id)
     feats, hits, labels, pair_ns, pair_xyz, prefixes = [], [], [], [], [], []
@@ -280,11 +295,18 @@ def _measured(x: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def fit_scorer(samples: Sequence[SequenceSample]) -> Any:
     """Gradient-boosted drone-vs-clutter trees over the labelled tracks of ``samples``."""
+    return fit_track_scorer(
+        np.concatenate([s.features for s in samples]),
+        np.concatenate([s.labels for s in samples]).astype(np.int64),
+        np.concatenate([s.hits for s in samples]),
+    )
+
+
+def fit_track_scorer(x: NDArray[np.float64], y: NDArray[np.int64], h: NDArray[np.float64]) -> Any:
+    """Gradient-boosted drone-vs-clutter trees over tracks' features ``x`` (T, F), labels
+    ``y`` (T,: 1 drone, 0 clutter, -1 left out) and detections ``h`` (T,)."""
     from sklearn.ensemble import HistGradientBoostingClassifier
 
-    x = np.concatenate([s.features for s in samples])
-    y = np.concatenate([s.labels for s in samples]).astype(np.int64)
-    h = np.concatenate([s.hits for s in samples])
     keep = y >= 0
     x, y, h = x[keep], y[keep], h[keep]
     if len(np.unique(y)) < 2:

@@ -112,7 +112,8 @@ def annotate(
             metavar="MODEL",
             help="A model from `cldet train`: its learned scorer picks the drone's tracks, its "
             "scan-time offset and bias replace the configuration's, and the drone type goes on "
-            "/cldet/class. Default: the hand-set scorer, no type.",
+            "/cldet/class. Default: the prior scorer learned on simulated worlds (config "
+            "tracking.prior_scorer), no type.",
         ),
     ] = None,
     live: Annotated[

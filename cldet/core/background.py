@@ -53,6 +53,8 @@ a plane and a height map, never one number, so that tilted mounts, slopes and ro
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numba
 import numpy as np
 from numpy.typing import NDArray
@@ -61,7 +63,7 @@ from scipy import ndimage
 from cldet.config import BackgroundConfig
 from cldet.core.ground import GroundModel
 
-__all__ = ["CORE", "FOREGROUND", "MARGIN", "BackgroundModel", "direction_cells"]
+__all__ = ["CORE", "FOREGROUND", "MARGIN", "BackgroundModel", "StaticView", "direction_cells"]
 
 FOREGROUND = np.uint8(0)  # in front of the static environment
 MARGIN = np.uint8(1)  # background only through dilation
@@ -342,6 +344,40 @@ def _floating_blobs(
     return out
 
 
+@dataclass(frozen=True)
+class StaticView:
+    """The static range image at one instant, for questions asked after the pass (the
+    refinement's): would a drone at a point have been seen in front of everything static, or
+    could the static scene there hide it (a drone that stopped beside a wall and was learned,
+    or that went behind it)?"""
+
+    around: NDArray[np.float32]  # (n_el * n_az,) the nearest static range in a cell and its 8
+    cell_deg: float
+    margin_m: float
+    margin_fraction: float
+    bottom_deg: float  # the lowest elevation the sensors see (their own frame)
+
+    def open(self, points: NDArray[np.floating]) -> NDArray[np.bool_]:
+        """(N,) the points lie in the sensors' field of view and in front of every static
+        surface of their direction and the 8 around by the background's margin: a drone there
+        returns foreground (with the default dilation of one cell)."""
+        p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+        cells, rng, _, _ = direction_cells(p, self.cell_deg)
+        horiz = np.hypot(p[:, 0], p[:, 1])
+        in_field = np.degrees(np.arctan2(p[:, 2], horiz)) >= self.bottom_deg + self.cell_deg
+        margin = np.maximum(self.margin_m, self.margin_fraction * rng)
+        return in_field & (rng + margin < self.around[cells])
+
+    def screened(self, points: NDArray[np.floating]) -> NDArray[np.bool_]:
+        """(N,) a static surface lies at or in front of each point, in its direction or one cell
+        around, no farther behind it than two surfaces can be told apart (max(1 m, 10 %)):
+        something static there hides it, or it is itself learned as static."""
+        p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+        cells, rng, _, _ = direction_cells(p, self.cell_deg)
+        reach = np.maximum(_SAME_SURFACE_M, _SAME_SURFACE_FRACTION * rng)
+        return self.around[cells] <= rng + reach
+
+
 class BackgroundModel:
     """Online static range image: per frame, ``advance`` to its stamp, ``classify``, ``update``.
 
@@ -367,6 +403,7 @@ class BackgroundModel:
         self.n_bins = 0  # finished bins so far
         self._static = np.full(n_cells, np.inf, dtype=np.float32)  # undilated static range
         self._dilated = self._static
+        self._around = self._static  # the nearest static range in each cell and its 8
         self._slack = np.zeros(n_cells, dtype=np.float32)  # extra margin (grazing surfaces)
         self.floating_cells = 0  # cells released as floating blobs at the last refresh
         self.ground = GroundModel()
@@ -377,6 +414,18 @@ class BackgroundModel:
     def warm(self) -> bool:
         """The warm-up bin has ended: ``classify`` can call anything foreground."""
         return self.n_bins > 0
+
+    def view(self) -> StaticView:
+        """The static range image as it stands (arrays shared, never changed in place: a refresh
+        replaces them)."""
+        cfg = self.cfg
+        return StaticView(
+            self._around,
+            float(cfg.cell_deg),
+            float(cfg.margin_m),
+            float(cfg.margin_fraction),
+            self._field_bottom_deg,
+        )
 
     def advance(self, stamp_ns: int) -> None:
         """Move the clock to ``stamp_ns``: a bin that ended before it is finished first."""
@@ -442,6 +491,9 @@ class BackgroundModel:
             dilated = ndimage.minimum_filter(static, size=size, mode=("nearest", "wrap"))
         self._static = np.ascontiguousarray(static, dtype=np.float32).ravel()
         self._dilated = np.ascontiguousarray(dilated, dtype=np.float32).ravel()
+        if cfg.dilate_cells != 1:
+            dilated = ndimage.minimum_filter(static, size=3, mode=("nearest", "wrap"))
+        self._around = np.ascontiguousarray(dilated, dtype=np.float32).ravel()
         # the ground from the last frame's returns on static surfaces (real points: a cell's
         # centre at its nearest range sits above a ground seen at a grazing angle)
         last = self._last_points

@@ -27,7 +27,8 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    detections lie within a drone's size or the track is too young for a running mean
    (``_protects``);
 5. the causal choice: the active track with the highest running evidence (the per-detection
-   weights of ``cldet.core.selection``, times its static and speed factors so far; a challenger
+   weights of ``cldet.core.selection``, times its static and speed factors so far, re-weighed
+   by the learned scorer as the refinement does: ``_learned_factor``; a challenger
    must beat the current choice by ``_SWITCH_RATIO``; no track is reported before one has
    gathered ``tracking.causal_confirm``, and none is chosen before it has lived
    ``tracking.causal_judge_s``, from when on it is judged static or rigidly fixed: for its
@@ -40,9 +41,12 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
 
 ``refine``: the candidate tracks plus the constant-velocity lines of sparse fast movers
 (``cldet.core.lines``, track-before-detect); the drone's chain of tracks chosen by
-whole-sequence evidence (``cldet.core.selection``); a forward-backward RTS smoother (``cldet.core.smoothing``) fills
+whole-sequence evidence (``cldet.core.selection``: hand-set factors re-weighed by a learned
+scorer, the packaged prior of ``cldet.core.prior`` unless a model brings its own); a
+forward-backward RTS smoother (``cldet.core.smoothing``) fills
 the gaps; before the first and after the last detection the track's own motion is
-extrapolated, its velocity decaying with time constant ``extrapolation_tau_s``; the centroid
+extrapolated, its velocity decaying with time constant ``extrapolation_tau_s``, or held still
+where carrying it on contradicts what was not seen (``_stop_unseen``); the centroid
 bias correction (``cldet.core.bias``) is applied last. Only when no candidate track exists at
 all is the configured fallback position used.
 
@@ -64,17 +68,20 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from cldet.config import CldetConfig, SmoothingConfig, TrackingConfig
-from cldet.core.background import FOREGROUND, MARGIN, BackgroundModel
+from cldet.core.background import FOREGROUND, MARGIN, BackgroundModel, StaticView
 from cldet.core.bias import apply_bias
 from cldet.core.clustering import cluster_points, summarize_clusters
 from cldet.core.features import FEATURE_NAMES, track_detections, track_features
 from cldet.core.frames import valid_points
 from cldet.core.lines import find_lines
 from cldet.core.model import LearnedModel
+from cldet.core.prior import load_prior
 from cldet.core.selection import (
     FIXED_JUDGE_S,
     FIXED_MEAN_HITS,
+    LEARNED_FLOOR,
     ScoredTrack,
+    TrackScorer,
     detection_weights,
     score_tracks,
     select_chain,
@@ -104,6 +111,7 @@ __all__ = [
 _LOST_AFTER_S = 0.5  # a gap without detection longer than this is reported as lost/reacquired
 _SWITCH_RATIO = 1.3  # causal choice: a challenger must have this much more evidence
 _JUDGE_STATIC_S = 1.0  # causal, without causal_judge_s: a track is judged static after this
+_LEARNED_EVERY = 5  # causal: a track's learned factor is recomputed after this many more hits
 
 
 @dataclass(frozen=True)
@@ -145,6 +153,7 @@ class Candidates:
     tables: list[ClusterTable]  # one per frame
     times_s: NDArray[np.float64]  # (F,) each frame's observation time, s from the first stamp
     stamps_ns: NDArray[np.int64]  # (F,)
+    view: StaticView | None = None  # the static scene after the last frame (None: unknown)
 
 
 class Estimator(Protocol):
@@ -280,6 +289,10 @@ class TrackEstimator:
         self._tables: list[ClusterTable] = []
         self._times = np.zeros(1024)  # observation time of each frame, s from the first stamp
         self._evidence: dict[int, _Evidence] = {}
+        # the learned scorer the causal choice re-weighs evidence with (the refinement's), and
+        # per track the hits its last probability was computed at and its factor
+        self._score_fn, self._floor = _scorer(model, config.tracking)
+        self._learned: dict[int, tuple[int, float]] = {}
         self._choice: int | None = None  # causal: the track followed
         # the followed track's filtered state at the last frame it was followed (obs time s,
         # position, velocity), and, once it is lost, where the causal estimate coasts from
@@ -317,7 +330,8 @@ class TrackEstimator:
         table = ClusterTable.from_clusters(clusters)
         if len(clusters):
             crowd = crowding(table.centroid, table.n_points, cfg.tracking.crowd_radius_m)
-            table = replace(table, height=self._heights(clusters), crowd=crowd)
+            screened = bg.view().screened(table.centroid)
+            table = replace(table, height=self._heights(clusters), crowd=crowd, screened=screened)
         self._stamps.append(frame.stamp_ns)
         self._tables.append(table)
         t_s = (frame.stamp_ns - self._stamps[0]) / NS_PER_S + self._offset_s
@@ -348,6 +362,7 @@ class TrackEstimator:
         if len(self._evidence) > 2 * len(active) + 64:
             alive = set(active.tolist())
             self._evidence = {k: v for k, v in self._evidence.items() if k in alive}
+            self._learned = {k: v for k, v in self._learned.items() if k in alive}
 
     def _heights(self, clusters: tuple[Cluster, ...]) -> NDArray[np.float64]:
         """(K,) each cluster's lowest point above the local ground, 0 where it may continue."""
@@ -504,6 +519,7 @@ class TrackEstimator:
         row = {}
         table = self._tables[index]
         seen_now = dict(zip(owner.tolist(), table.n_points.tolist(), strict=True))
+        hand: dict[int, tuple[float, int]] = {}  # eligible track -> hand-set score, hits
         for i, tid in enumerate(active.ids.tolist()):
             ev = self._evidence.get(tid)
             if ev is None:
@@ -511,7 +527,14 @@ class TrackEstimator:
             row[tid] = i
             if tid != self._choice and ev.lived < tc.causal_judge_s:
                 continue  # not chosen before it can be judged static or fixed
-            sc = ev.score(tc)
+            hand[tid] = (ev.score(tc), ev.hits)
+        # the learned factor lies in [floor, 1]: a track whose hand-set score is below floor
+        # times the highest cannot win, and is not scored (the scorer costs a feature vector);
+        # the followed one always is (its score decides whether to switch)
+        top = max((h for h, _ in hand.values()), default=0.0) * self._floor
+        for tid, (sc, hits) in hand.items():
+            if sc >= top or tid == self._choice:
+                sc *= self._learned_factor(tid, hits)
             if tid == self._choice:
                 current_score = sc
             # ties (young tracks) go to the one seen with more points now: the surer object
@@ -551,6 +574,26 @@ class TrackEstimator:
             n,
             float(np.sqrt(max(active.pos_var[i], 0.0))),
         )
+
+    def _learned_factor(self, track_id: int, hits: int) -> float:
+        """The learned scorer's re-weighing of a track's running evidence, ``floor + (1 -
+        floor) p`` as in the refinement, from its detections so far; recomputed once its
+        detections have grown by a quarter (at least ``_LEARNED_EVERY``), so that a long
+        track costs O(H log H) in all."""
+        if self._score_fn is None:
+            return 1.0
+        done = self._learned.get(track_id)
+        if done is not None and hits < max(done[0] + _LEARNED_EVERY, 1.25 * done[0]):
+            return done[1]
+        rec = self._tracker.record(track_id)
+        if rec is None:
+            return 1.0
+        det = track_detections(rec, self._tables, self.config.tracking)
+        features = track_features(rec, det, self._times[rec.frames])
+        p = float(self._score_fn(features[None, :])[0])
+        factor = self._floor + (1.0 - self._floor) * p
+        self._learned[track_id] = (hits, factor)
+        return factor
 
     def _hand_over(
         self,
@@ -642,7 +685,9 @@ class TrackEstimator:
                     self._tables, t_s, self.config.tracking, self._tracker.next_id, self._offset_s
                 )
             stamps = np.asarray(self._stamps, dtype=np.int64)
-            self._candidates = Candidates(records, list(self._tables), t_s, stamps)
+            self._candidates = Candidates(
+                records, list(self._tables), t_s, stamps, self.background.view()
+            )
         return self._candidates
 
     def refine(self, model: LearnedModel | None = None) -> SequenceEstimate:
@@ -664,8 +709,7 @@ def refine_candidates(
     offset_s = cfg.frames.scan_offset_s
     stamps, t_s = cand.stamps_ns, cand.times_s
     tc = cfg.tracking
-    scorer = model.drone_probability if model is not None and model.scorer is not None else None
-    scored = score_tracks(cand.records, cand.tables, t_s, tc, scorer)
+    scored = score_tracks(cand.records, cand.tables, t_s, tc, *_scorer(model, tc))
     chain = select_chain(scored, tc)
     if not chain:
         pos = np.asarray(tc.fallback_position, dtype=np.float64)
@@ -711,6 +755,12 @@ def refine_candidates(
     q, tau_s = cfg.smoothing.accel_psd, cfg.smoothing.extrapolation_tau_s
     scan_s = float(np.median(np.diff(t_s))) if n > 1 else 0.0  # a scan lasts a frame period
     ends = _extrapolation_ends(t_s[idx], z[idx], sm.position, sm.velocity, scan_s, cfg.smoothing)
+    if cand.view is not None and cfg.smoothing.unseen_check_s > 0:
+        tr0, i0, _ = chain[0]
+        c0 = int(tr0.record.clusters[i0])
+        flags = cand.tables[int(tr0.record.frames[i0])].screened
+        came_out = bool(flags[c0]) if flags is not None and c0 >= 0 else False
+        ends = _stop_unseen(ends, t_s, have, cand.view, came_out, cfg.smoothing)
     for f in list(range(first)) + list(range(last + 1, n)):
         k_end = 0 if f < first else -1
         origin, velocity, hold_s = ends[k_end]
@@ -771,6 +821,69 @@ def _extrapolation_ends(
             hold_s = min(run.duration_s, cfg.straight_max_hold_s)
             ends[key] = (run.position, sign * run.velocity, hold_s)
     return ends
+
+
+def _scorer(model: LearnedModel | None, cfg: TrackingConfig) -> tuple[TrackScorer | None, float]:
+    """The learned track scorer the refinement uses, and its floor: the model's own, else the
+    packaged prior (``tracking.prior_scorer``), else none."""
+    if model is not None and model.scorer is not None:
+        return model.drone_probability, LEARNED_FLOOR
+    if cfg.prior_scorer:
+        prior = load_prior()
+        return prior.drone_probability, prior.floor
+    return None, LEARNED_FLOOR
+
+
+def _stop_unseen(
+    ends: dict[int, tuple[NDArray[np.float64], NDArray[np.float64], float]],
+    t_s: NDArray[np.float64],
+    have: NDArray[np.bool_],
+    view: StaticView,
+    came_out: bool,
+    cfg: SmoothingConfig,
+) -> dict[int, tuple[NDArray[np.float64], NDArray[np.float64], float]]:
+    """``ends`` (see ``_extrapolation_ends``), each held still instead where the motion carried
+    on contradicts what was not seen: over ``unseen_check_s`` beyond that end the carried-on
+    path lies in open view (``StaticView.open``) where, at the detection rate of the track's
+    last (first) ``unseen_check_s``, scaled by range^-2 as returns are, at least one detection
+    was likelier than ``unseen_confidence``; and the static scene at that end could hide a
+    drone that stayed: after the last detection, the final scene is screened there (a drone
+    that stopped and was learned as background, or hid behind something); before the first,
+    the scene was screened where the track began (``came_out``: it came out of a hover that
+    had been learned). A fast pass leaving the field, a drone turning behind a building, or a
+    sparse far one keep their motion; so does one that ended in the open, where a drone that
+    stopped would still be seen."""
+    first, last = (int(i) for i in np.flatnonzero(have)[[0, -1]])
+    out = dict(ends)
+    for key, end, sign in ((0, first, -1), (-1, last, 1)):
+        origin, velocity, hold_s = ends[key]
+        beyond = np.flatnonzero(
+            (sign * (t_s - t_s[end]) > 0) & (sign * (t_s - t_s[end]) <= cfg.unseen_check_s)
+        )
+        within = np.flatnonzero(
+            (sign * (t_s[end] - t_s) > 0)
+            & (sign * (t_s[end] - t_s) <= cfg.unseen_check_s)
+            & (np.arange(len(t_s)) >= first)
+            & (np.arange(len(t_s)) <= last)
+        )
+        if len(beyond) == 0 or len(within) < 3 or not np.any(velocity):
+            continue
+        rate = min(float(np.mean(have[within])), 0.9)
+        if rate <= 0.0:
+            continue
+        dt = t_s[beyond] - t_s[end]
+        tau, still = cfg.extrapolation_tau_s, np.zeros((2, 2))
+        path = np.array([extrapolate(origin, velocity, still, d, 0.0, tau, hold_s)[0] for d in dt])
+        r_end = float(np.linalg.norm(origin))
+        r = np.maximum(np.linalg.norm(path, axis=1), 1e-3)
+        returns = -np.log1p(-rate) * (r_end / r) ** 2  # Poisson mean of a detection's returns
+        p_seen = 1.0 - np.exp(-returns[view.open(path)])
+        if np.prod(1.0 - p_seen) > 1.0 - cfg.unseen_confidence:
+            continue  # the carried-on motion could have gone unseen
+        hidden = came_out if key == 0 else bool(view.screened(origin[None, :])[0])
+        if hidden:
+            out[key] = (origin, np.zeros(3), 0.0)
+    return out
 
 
 CLASS_EVERY_S = 1.0

@@ -178,13 +178,14 @@ def score_tracks(
     times_s: NDArray[np.float64],
     cfg: TrackingConfig,
     scorer: TrackScorer | None = None,
+    floor: float = LEARNED_FLOOR,
 ) -> list[ScoredTrack]:
     """Score every candidate track of two detections or more (see the module docstring).
 
     With a learned ``scorer`` the hand-set track factors (speed, static, fixed, sensors) are
     re-weighed by its probability ``p`` that the track is the drone, by
-    ``LEARNED_FLOOR + (1 - LEARNED_FLOOR) p``: the physics stays the prior, what was learned from
-    labelled logs re-weighs it within bounds.
+    ``floor + (1 - floor) p``: the physics stays the prior, what was learned from labelled logs
+    (or simulated worlds: ``cldet.core.prior``) re-weighs it within bounds.
     """
     kept: list[tuple[TrackRecord, TrackDetections, NDArray[np.float64]]] = []
     for rec in records:
@@ -199,7 +200,7 @@ def score_tracks(
     if scorer is not None and kept:
         feats = np.array([track_features(r, d, times_s[r.frames]) for r, d, _ in kept])
         p = np.asarray(scorer(feats), dtype=np.float64)
-        factors = factors * (LEARNED_FLOOR + (1.0 - LEARNED_FLOOR) * p)
+        factors = factors * (floor + (1.0 - floor) * p)
     out = []
     for (rec, _, per_det), factor in zip(kept, factors, strict=True):
         contribution = per_det * float(factor)

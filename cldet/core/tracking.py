@@ -65,6 +65,8 @@ class ClusterTable:
     )
     size: NDArray[np.float64] | None = None  # (K,3) box edges along x, y, z, metres
     crowd: NDArray[np.int64] | None = None  # (K,) other clusters within the crowd radius
+    # (K,) a static surface at or in front of the cluster when it was seen (StaticView.screened)
+    screened: NDArray[np.bool_] | None = None
 
     def crowds(self) -> NDArray[np.int64]:
         """(K,) how many other clusters of the frame lie near each one (0: not counted)."""
