@@ -231,8 +231,8 @@ class TrackingConfig(BaseModel):
         default=True,
         description="the refinement re-weighs the hand-set track factors by the drone"
         " probability of the scorer learned on the simulator's randomised development worlds"
-        " (cldet/core/prior.py; a --model's own scorer replaces it); false: hand-set factors"
-        " alone",
+        " (cldet/core/prior.py; a --model's own scorer re-weighs them as well); false: the"
+        " hand-set factors alone, or with a --model's scorer only",
     )
     fixed_factor: float = Field(
         default=0.01,
@@ -412,6 +412,12 @@ class SmoothingConfig(BaseModel):
         lt=1,
         description="... 'could not have gone undetected': the chance of at least one detection"
         " along the carried-on path, from the track's own detection rate near that end",
+    )
+    came_to_rest: bool = Field(
+        default=True,
+        description="a track whose end position became static while it was followed (the"
+        " sensors saw through that spot before) came to rest there and was learned as"
+        " background: its position is held there, not carried on (with unseen_check_s > 0)",
     )
 
 

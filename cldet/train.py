@@ -15,7 +15,7 @@ estimator's per-frame verb with the configuration given and keeps its candidate 
 - the **drone-vs-clutter scorer**: gradient-boosted trees over the tracks' physical features
   (:data:`cldet.core.features.FEATURE_NAMES`), each track weighted by its detections and the two
   classes balanced; the refinement re-weighs the hand-set track factors by its probability
-  (``cldet.core.selection.LEARNED_FLOOR``);
+  (``cldet.core.selection.LEARNED_FLOOR``), on top of the packaged prior's re-weighing;
 - the **drone-type classifier** (when the logs carry ``/class`` with two classes or more): the
   shape and return features (:data:`cldet.core.features.TYPE_FEATURES`) of the drone tracks'
   prefixes,

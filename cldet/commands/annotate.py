@@ -110,10 +110,11 @@ def annotate(
         typer.Option(
             "--model",
             metavar="MODEL",
-            help="A model from `cldet train`: its learned scorer picks the drone's tracks, its "
-            "scan-time offset and bias replace the configuration's, and the drone type goes on "
-            "/cldet/class. Default: the prior scorer learned on simulated worlds (config "
-            "tracking.prior_scorer), no type.",
+            help="A model from `cldet train`: its learned scorer re-weighs the drone's tracks "
+            "(with the prior scorer learned on simulated worlds, config "
+            "tracking.prior_scorer), its scan-time offset and bias replace the "
+            "configuration's, and the drone type goes on /cldet/class. Default: the prior "
+            "scorer alone, no type.",
         ),
     ] = None,
     live: Annotated[

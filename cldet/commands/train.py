@@ -67,7 +67,7 @@ def train(
 
     - a drone-vs-clutter scorer (gradient-boosted trees over each track's height above the
       ground, size, cross-section, speed, jitter, duration, sensors, ...) that re-weighs the
-      hand-set track factors (by 0.3 + 0.7 p) when choosing the drone's tracks, in place of
+      hand-set track factors (by 0.3 + 0.7 p) when choosing the drone's tracks, on top of
       the prior scorer learned on simulated worlds that annotate uses without a model;
 
     - a drone-type classifier (when the logs carry /class with two classes or more), voted over

@@ -72,6 +72,9 @@ CORE = np.uint8(2)  # at or behind the static range of its own cell
 # two ranges in one cell belong to the same surface when within max(1 m, 10 %): the clearance
 # the floating-blob rule uses, far above range noise and foliage depth
 _SAME_SURFACE_M = 1.0
+NO_ONSET = np.iinfo(np.int64).min  # a static surface there as long as the window remembers
+_ONSET_SEEN_THROUGH = 2  # bins with a farther return that show a spot was empty before
+_ONSET_CONFIDENCE = 0.95  # ... or bins without any return, at the surface's own hit rate
 _SAME_SURFACE_FRACTION = 0.1
 # a floating blob may rest on a separate surface right below it this many cells wide (a pole or
 # post top: a drone hovering just above it)
@@ -356,6 +359,11 @@ class StaticView:
     margin_m: float
     margin_fraction: float
     bottom_deg: float  # the lowest elevation the sensors see (their own frame)
+    # (n_el * n_az,) the undilated static range and, per cell, when its static surface was
+    # first seen there after the space in front had been seen empty (ns; NO_ONSET: always
+    # there as far as the window remembers); None where not computed (``view(onset=True)``)
+    static: NDArray[np.float32] | None = None
+    onset_ns: NDArray[np.int64] | None = None
 
     def open(self, points: NDArray[np.floating]) -> NDArray[np.bool_]:
         """(N,) the points lie in the sensors' field of view and in front of every static
@@ -377,6 +385,19 @@ class StaticView:
         reach = np.maximum(_SAME_SURFACE_M, _SAME_SURFACE_FRACTION * rng)
         return self.around[cells] <= rng + reach
 
+    def appeared(self, points: NDArray[np.floating], since_ns: int) -> NDArray[np.bool_]:
+        """(N,) the static surface of each point's direction lies at the point (within the
+        background's margin) and was first seen there at ``since_ns`` or later, where before
+        the sensors had seen through that spot: something came to rest there (a drone that
+        stopped and was learned as background). False where the onset was not computed."""
+        p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+        if self.static is None or self.onset_ns is None:
+            return np.zeros(len(p), dtype=bool)
+        cells, rng, _, _ = direction_cells(p, self.cell_deg)
+        margin = np.maximum(self.margin_m, self.margin_fraction * rng)
+        here = np.abs(self.static[cells] - rng) <= margin
+        return here & (self.onset_ns[cells] >= since_ns)
+
 
 class BackgroundModel:
     """Online static range image: per frame, ``advance`` to its stamp, ``classify``, ``update``.
@@ -396,6 +417,7 @@ class BackgroundModel:
         # per cell, its nearest range in each of the last bins (cell-major: the order statistic
         # runs along contiguous memory)
         self._ring = np.full((n_cells, cfg.window_bins), np.inf, dtype=np.float32)
+        self._ring_end_ns = np.zeros(cfg.window_bins, dtype=np.int64)  # each slot's bin end
         self._seen = np.zeros(n_cells, dtype=bool)  # cells ever hit in a finished bin
         self._current = np.full(n_cells, np.inf, dtype=np.float32)
         self._bin_ns = max(1, int(round(cfg.bin_s * 1e9)))
@@ -415,9 +437,10 @@ class BackgroundModel:
         """The warm-up bin has ended: ``classify`` can call anything foreground."""
         return self.n_bins > 0
 
-    def view(self) -> StaticView:
+    def view(self, onset: bool = False) -> StaticView:
         """The static range image as it stands (arrays shared, never changed in place: a refresh
-        replaces them)."""
+        replaces them); with ``onset``, also when each cell's static surface appeared
+        (:meth:`onsets`: the window's bins are read, so only for a final view)."""
         cfg = self.cfg
         return StaticView(
             self._around,
@@ -425,7 +448,40 @@ class BackgroundModel:
             float(cfg.margin_m),
             float(cfg.margin_fraction),
             self._field_bottom_deg,
+            self._static if onset else None,
+            self.onsets() if onset else None,
         )
+
+    def onsets(self) -> NDArray[np.int64]:
+        """(n_el * n_az,) per cell, the end of the first bin of the window in which its static
+        surface was seen, where before it the sensors saw through that spot: a farther return
+        in at least ``_ONSET_SEEN_THROUGH`` bins, or none in so many bins that a surface there,
+        hit at its rate since, would have been hit (``1 - _ONSET_CONFIDENCE`` chance); else
+        ``NO_ONSET`` (there as long as the window remembers, or never static)."""
+        cfg = self.cfg
+        b = min(self.n_bins, cfg.window_bins)
+        out = np.full(len(self._static), NO_ONSET, dtype=np.int64)
+        cells = np.flatnonzero(np.isfinite(self._static))
+        if b < 2 or not len(cells):
+            return out
+        order = (np.arange(b) + (self.n_bins - b)) % cfg.window_bins  # oldest bin first
+        ring = self._ring[cells][:, order]  # (C, b)
+        static = self._static[cells, None]
+        margin = np.maximum(cfg.margin_m, cfg.margin_fraction * static)
+        near = np.abs(ring - static) <= margin
+        far = np.isfinite(ring) & (ring > static + margin)
+        first = np.argmax(near, axis=1)  # the static surface is hit in some bin (k-th smallest)
+        before = np.arange(b)[None, :] < first[:, None]
+        n_far = np.sum(far & before, axis=1)
+        n_none = np.sum(~np.isfinite(ring) & before, axis=1)
+        rate = np.sum(near & ~before, axis=1) / (b - first)
+        with np.errstate(divide="ignore"):
+            missed = n_none * np.log1p(-np.minimum(rate, 0.999))  # log P(no hit in those bins)
+        new = (first > 0) & (
+            (n_far >= _ONSET_SEEN_THROUGH) | (missed <= np.log(1.0 - _ONSET_CONFIDENCE))
+        )
+        out[cells[new]] = self._ring_end_ns[order][first[new]] - self._bin_ns
+        return out
 
     def advance(self, stamp_ns: int) -> None:
         """Move the clock to ``stamp_ns``: a bin that ended before it is finished first."""
@@ -435,6 +491,7 @@ class BackgroundModel:
         if stamp_ns < self._bin_end_ns:
             return
         self._ring[:, self.n_bins % self.cfg.window_bins] = self._current
+        self._ring_end_ns[self.n_bins % self.cfg.window_bins] = self._bin_end_ns
         self._seen |= np.isfinite(self._current)
         self.n_bins += 1
         self._current = np.full_like(self._current, np.inf)

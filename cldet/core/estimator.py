@@ -41,12 +41,13 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
 
 ``refine``: the candidate tracks plus the constant-velocity lines of sparse fast movers
 (``cldet.core.lines``, track-before-detect); the drone's chain of tracks chosen by
-whole-sequence evidence (``cldet.core.selection``: hand-set factors re-weighed by a learned
-scorer, the packaged prior of ``cldet.core.prior`` unless a model brings its own); a
+whole-sequence evidence (``cldet.core.selection``: hand-set factors re-weighed by the
+packaged prior of ``cldet.core.prior`` and by a model's own scorer where one is given); a
 forward-backward RTS smoother (``cldet.core.smoothing``) fills
 the gaps; before the first and after the last detection the track's own motion is
 extrapolated, its velocity decaying with time constant ``extrapolation_tau_s``, or held still
-where carrying it on contradicts what was not seen (``_stop_unseen``); the centroid
+where carrying it on contradicts what was not seen, or where the static scene shows it came
+to rest at its end (``_stop_unseen``); the centroid
 bias correction (``cldet.core.bias``) is applied last. Only when no candidate track exists at
 all is the configured fallback position used.
 
@@ -82,6 +83,7 @@ from cldet.core.selection import (
     LEARNED_FLOOR,
     ScoredTrack,
     TrackScorer,
+    TrackWeigher,
     detection_weights,
     score_tracks,
     select_chain,
@@ -289,9 +291,9 @@ class TrackEstimator:
         self._tables: list[ClusterTable] = []
         self._times = np.zeros(1024)  # observation time of each frame, s from the first stamp
         self._evidence: dict[int, _Evidence] = {}
-        # the learned scorer the causal choice re-weighs evidence with (the refinement's), and
-        # per track the hits its last probability was computed at and its factor
-        self._score_fn, self._floor = _scorer(model, config.tracking)
+        # the learned re-weighing the causal choice applies to evidence (the refinement's), and
+        # per track the hits its last factor was computed at and the factor
+        self._weigher = _weigher(model, config.tracking)
         self._learned: dict[int, tuple[int, float]] = {}
         self._choice: int | None = None  # causal: the track followed
         # the followed track's filtered state at the last frame it was followed (obs time s,
@@ -531,7 +533,8 @@ class TrackEstimator:
         # the learned factor lies in [floor, 1]: a track whose hand-set score is below floor
         # times the highest cannot win, and is not scored (the scorer costs a feature vector);
         # the followed one always is (its score decides whether to switch)
-        top = max((h for h, _ in hand.values()), default=0.0) * self._floor
+        floor = self._weigher.floor if self._weigher is not None else 1.0
+        top = max((h for h, _ in hand.values()), default=0.0) * floor
         for tid, (sc, hits) in hand.items():
             if sc >= top or tid == self._choice:
                 sc *= self._learned_factor(tid, hits)
@@ -576,11 +579,11 @@ class TrackEstimator:
         )
 
     def _learned_factor(self, track_id: int, hits: int) -> float:
-        """The learned scorer's re-weighing of a track's running evidence, ``floor + (1 -
-        floor) p`` as in the refinement, from its detections so far; recomputed once its
+        """The learned re-weighing of a track's running evidence (:class:`TrackWeigher`), as in
+        the refinement, from its detections so far; recomputed once its
         detections have grown by a quarter (at least ``_LEARNED_EVERY``), so that a long
         track costs O(H log H) in all."""
-        if self._score_fn is None:
+        if self._weigher is None:
             return 1.0
         done = self._learned.get(track_id)
         if done is not None and hits < max(done[0] + _LEARNED_EVERY, 1.25 * done[0]):
@@ -590,8 +593,7 @@ class TrackEstimator:
             return 1.0
         det = track_detections(rec, self._tables, self.config.tracking)
         features = track_features(rec, det, self._times[rec.frames])
-        p = float(self._score_fn(features[None, :])[0])
-        factor = self._floor + (1.0 - self._floor) * p
+        factor = float(self._weigher(features[None, :])[0])
         self._learned[track_id] = (hits, factor)
         return factor
 
@@ -686,7 +688,7 @@ class TrackEstimator:
                 )
             stamps = np.asarray(self._stamps, dtype=np.int64)
             self._candidates = Candidates(
-                records, list(self._tables), t_s, stamps, self.background.view()
+                records, list(self._tables), t_s, stamps, self.background.view(onset=True)
             )
         return self._candidates
 
@@ -709,7 +711,7 @@ def refine_candidates(
     offset_s = cfg.frames.scan_offset_s
     stamps, t_s = cand.stamps_ns, cand.times_s
     tc = cfg.tracking
-    scored = score_tracks(cand.records, cand.tables, t_s, tc, *_scorer(model, tc))
+    scored = score_tracks(cand.records, cand.tables, t_s, tc, _weigher(model, tc))
     chain = select_chain(scored, tc)
     if not chain:
         pos = np.asarray(tc.fallback_position, dtype=np.float64)
@@ -760,7 +762,13 @@ def refine_candidates(
         c0 = int(tr0.record.clusters[i0])
         flags = cand.tables[int(tr0.record.frames[i0])].screened
         came_out = bool(flags[c0]) if flags is not None and c0 >= 0 else False
-        ends = _stop_unseen(ends, t_s, have, cand.view, came_out, cfg.smoothing)
+        # the chain's end position became static while it was followed: it stopped there
+        stayed = cfg.smoothing.came_to_rest and bool(
+            cand.view.appeared(ends[-1][0][None, :], int(stamps[first]))[0]
+        )
+        # nothing is foreground during the background's warm-up: no evidence either way
+        blind = stamps < stamps[0] + int(round(cfg.background.bin_s * 1e9))
+        ends = _stop_unseen(ends, t_s, have, blind, cand.view, came_out, stayed, cfg.smoothing)
     for f in list(range(first)) + list(range(last + 1, n)):
         k_end = 0 if f < first else -1
         origin, velocity, hold_s = ends[k_end]
@@ -823,27 +831,31 @@ def _extrapolation_ends(
     return ends
 
 
-def _scorer(model: LearnedModel | None, cfg: TrackingConfig) -> tuple[TrackScorer | None, float]:
-    """The learned track scorer the refinement uses, and its floor: the model's own, else the
-    packaged prior (``tracking.prior_scorer``), else none."""
-    if model is not None and model.scorer is not None:
-        return model.drone_probability, LEARNED_FLOOR
+def _weigher(model: LearnedModel | None, cfg: TrackingConfig) -> TrackWeigher | None:
+    """The learned re-weighing of the hand-set track factors: the packaged prior
+    (``tracking.prior_scorer``) times a model's own scorer, either alone, or none."""
+    scorers: list[tuple[TrackScorer, float]] = []
     if cfg.prior_scorer:
         prior = load_prior()
-        return prior.drone_probability, prior.floor
-    return None, LEARNED_FLOOR
+        scorers.append((prior.drone_probability, prior.floor))
+    if model is not None and model.scorer is not None:
+        scorers.append((model.drone_probability, LEARNED_FLOOR))
+    return TrackWeigher(tuple(scorers)) if scorers else None
 
 
 def _stop_unseen(
     ends: dict[int, tuple[NDArray[np.float64], NDArray[np.float64], float]],
     t_s: NDArray[np.float64],
     have: NDArray[np.bool_],
+    blind: NDArray[np.bool_],
     view: StaticView,
     came_out: bool,
+    stayed: bool,
     cfg: SmoothingConfig,
 ) -> dict[int, tuple[NDArray[np.float64], NDArray[np.float64], float]]:
     """``ends`` (see ``_extrapolation_ends``), each held still instead where the motion carried
-    on contradicts what was not seen: over ``unseen_check_s`` beyond that end the carried-on
+    on contradicts what was not seen: over ``unseen_check_s`` beyond that end (the frames that
+    are not ``blind``: during the background's warm-up nothing can be detected) the carried-on
     path lies in open view (``StaticView.open``) where, at the detection rate of the track's
     last (first) ``unseen_check_s``, scaled by range^-2 as returns are, at least one detection
     was likelier than ``unseen_confidence``; and the static scene at that end could hide a
@@ -852,13 +864,19 @@ def _stop_unseen(
     the scene was screened where the track began (``came_out``: it came out of a hover that
     had been learned). A fast pass leaving the field, a drone turning behind a building, or a
     sparse far one keep their motion; so does one that ended in the open, where a drone that
-    stopped would still be seen."""
+    stopped would still be seen. ``stayed``: the static surface at the track's end appeared
+    there while it was followed, where the sensors had seen through that spot before
+    (``StaticView.appeared``): it came to rest there and was learned, and is held there even
+    where its carried-on path could have gone unseen (behind the very surface it became)."""
     first, last = (int(i) for i in np.flatnonzero(have)[[0, -1]])
     out = dict(ends)
     for key, end, sign in ((0, first, -1), (-1, last, 1)):
         origin, velocity, hold_s = ends[key]
+        if key == -1 and stayed:
+            out[key] = (origin, np.zeros(3), 0.0)
+            continue
         beyond = np.flatnonzero(
-            (sign * (t_s - t_s[end]) > 0) & (sign * (t_s - t_s[end]) <= cfg.unseen_check_s)
+            (sign * (t_s - t_s[end]) > 0) & (sign * (t_s - t_s[end]) <= cfg.unseen_check_s) & ~blind
         )
         within = np.flatnonzero(
             (sign * (t_s[end] - t_s) > 0)

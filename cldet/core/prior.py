@@ -9,8 +9,9 @@ physical quantities only) fitted on the candidate tracks of hundreds of randomis
 ``cldet simulate --randomize`` from the development seeds (other sites, tilts, mounts, ground,
 flights and distractors in every world), never on the evaluation seeds. It re-weighs the
 hand-set factors by ``floor + (1 - floor) p`` (``tracking.prior_scorer``; ``floor`` is
-stored with it). ``cldet annotate --model`` replaces it with a scorer learned from the user's
-own labelled logs; ``tracking.prior_scorer: false`` leaves the hand-set factors alone.
+stored with it). ``cldet annotate --model`` adds the scorer learned from the user's own
+labelled logs: the two factors multiply (``cldet.core.selection.TrackWeigher``);
+``tracking.prior_scorer: false`` leaves the hand-set factors alone, or to the model's scorer.
 
 The file ``prior_scorer.json`` is plain JSON (:class:`cldet.core.trees.TreeEnsemble`), written
 by ``benchmarks/train_prior.py``, which says how to make it again.

@@ -77,6 +77,7 @@ from cldet.core.tracking import (
 __all__ = [
     "ScoredTrack",
     "TrackScorer",
+    "TrackWeigher",
     "detection_weights",
     "score_tracks",
     "select_chain",
@@ -172,20 +173,42 @@ TrackScorer = Callable[[NDArray[np.float64]], NDArray[np.float64]]
 """A learned scorer: track features (T, len(FEATURE_NAMES)) -> probability of the drone (T,)."""
 
 
+@dataclass(frozen=True)
+class TrackWeigher:
+    """Learned re-weighings of the hand-set track factors.
+
+    Each ``(scorer, floor)`` weighs a track by ``floor + (1 - floor) p``, ``p`` its
+    probability that the track is the drone: within bounds, never to nothing. Several multiply
+    (the packaged prior and a user's model: what each learned counts).
+    """
+
+    scorers: tuple[tuple[TrackScorer, float], ...]
+
+    @property
+    def floor(self) -> float:
+        """The least factor it can give a track."""
+        return float(np.prod([floor for _, floor in self.scorers]))
+
+    def __call__(self, features: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(T,) factors of the tracks with features (T, len(FEATURE_NAMES))."""
+        factors = np.ones(len(features))
+        for scorer, floor in self.scorers:
+            factors *= floor + (1.0 - floor) * np.asarray(scorer(features), dtype=np.float64)
+        return factors
+
+
 def score_tracks(
     records: list[TrackRecord],
     tables: list[ClusterTable],
     times_s: NDArray[np.float64],
     cfg: TrackingConfig,
-    scorer: TrackScorer | None = None,
-    floor: float = LEARNED_FLOOR,
+    weigher: TrackWeigher | None = None,
 ) -> list[ScoredTrack]:
     """Score every candidate track of two detections or more (see the module docstring).
 
-    With a learned ``scorer`` the hand-set track factors (speed, static, fixed, sensors) are
-    re-weighed by its probability ``p`` that the track is the drone, by
-    ``floor + (1 - floor) p``: the physics stays the prior, what was learned from labelled logs
-    (or simulated worlds: ``cldet.core.prior``) re-weighs it within bounds.
+    With a ``weigher`` the hand-set track factors (speed, static, fixed, sensors) are
+    re-weighed by what was learned: the physics stays the prior, what was learned from
+    labelled logs (or simulated worlds: ``cldet.core.prior``) re-weighs it within bounds.
     """
     kept: list[tuple[TrackRecord, TrackDetections, NDArray[np.float64]]] = []
     for rec in records:
@@ -197,10 +220,9 @@ def score_tracks(
         )
         kept.append((rec, det, per_det))
     factors = np.array([_hand_factor(r, d, times_s, cfg) for r, d, _ in kept])
-    if scorer is not None and kept:
+    if weigher is not None and kept:
         feats = np.array([track_features(r, d, times_s[r.frames]) for r, d, _ in kept])
-        p = np.asarray(scorer(feats), dtype=np.float64)
-        factors = factors * (floor + (1.0 - floor) * p)
+        factors = factors * weigher(feats)
     out = []
     for (rec, _, per_det), factor in zip(kept, factors, strict=True):
         contribution = per_det * float(factor)

@@ -68,6 +68,24 @@ def test_an_object_that_left_is_forgotten_within_the_window() -> None:
     assert np.all(model.classify(pts)[on] == FOREGROUND)
 
 
+def test_a_surface_that_came_to_rest_has_an_onset_and_the_wall_has_none() -> None:
+    # a ball comes to rest 0.8 m in front of the wall at 3 s (scan 30) and stays: before, the
+    # wall behind it was seen through that spot, so its static surface appeared then (when a
+    # ray first hit it there: a 2 deg cell gets under one ray a scan here); the wall beside it
+    # was there as long as the window remembers
+    ball: Sphere = ((11.5, 0.0, 2.0), 0.3)
+    model = _learn([[]] * 30 + [[ball]] * 30)
+    view = model.view(onset=True)
+    front = np.array([[11.2, 0.0, 2.0]])
+    wall = np.array([[12.0, 3.0, 2.0]])
+    assert view.appeared(front, 2 * NS).all()
+    assert view.appeared(front, 30 * NS).all()
+    assert not view.appeared(front, 45 * NS).any()  # it was there before 4.5 s
+    assert not view.appeared(wall, 0).any()
+    assert not view.appeared(front + [2.0, 0.0, 0.0], 0).any()  # not at the surface's range
+    assert not model.view().appeared(front, 0).any()  # a per-frame view has no onsets
+
+
 def test_object_present_in_every_bin_is_background() -> None:
     # a sphere resting on the wall (not floating) is environment even though small
     box: Sphere = ((11.8, 0.0, 4.2), 0.25)

@@ -559,18 +559,26 @@ def test_a_straight_pass_seen_only_midway_is_extrapolated_along_its_line() -> No
 
 
 def _walk_then_unseen(
-    view_ranges: dict[int, float], check_s: float = 1.0
+    view_ranges: dict[int, float],
+    check_s: float = 1.0,
+    onset: dict[int, int] | None = None,
+    rest: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The refined track of one drone seen (ten points a scan) in scans 10-29 of 60 walking
     along y at 2 m/s, 10 m out, then never again; the final static scene is empty but for
-    ``view_ranges`` (direction cell -> static range); ``smoothing.unseen_check_s`` =
-    ``check_s``. (estimates (60,3), its last detection)"""
-    from cldet.core.background import StaticView, direction_cells
+    ``view_ranges`` (direction cell -> static range), whose surfaces appeared at ``onset``
+    (cell -> ns; the others were always there); ``smoothing.unseen_check_s`` = ``check_s``,
+    ``smoothing.came_to_rest`` = ``rest``.
+    (estimates (60,3), its last detection)"""
+    from cldet.core.background import NO_ONSET, StaticView, direction_cells
     from cldet.core.estimator import Candidates, refine_candidates
     from cldet.core.tracking import ClusterTable, TrackRecord
 
     cfg = load_config(
-        overrides={"frames": {"scan_offset_s": 0.0}, "smoothing": {"unseen_check_s": check_s}}
+        overrides={
+            "frames": {"scan_offset_s": 0.0},
+            "smoothing": {"unseen_check_s": check_s, "came_to_rest": rest},
+        }
     )
     n, seen = 60, np.arange(10, 30)
     pos = np.array([[10.0, -3.0 + 0.2 * (k - 10), 2.0] for k in seen])
@@ -589,7 +597,10 @@ def _walk_then_unseen(
     around = np.full(90 * 180, np.inf, dtype=np.float32)
     for cell, r in view_ranges.items():
         around[cell] = r
-    view = StaticView(around, bc.cell_deg, bc.margin_m, bc.margin_fraction, -7.3)
+    onset_ns = np.full(len(around), NO_ONSET, dtype=np.int64)
+    for cell, ns in (onset or {}).items():
+        onset_ns[cell] = ns
+    view = StaticView(around, bc.cell_deg, bc.margin_m, bc.margin_fraction, -7.3, around, onset_ns)
     times = 0.1 * np.arange(n)
     cand = Candidates([rec], tables, times, np.arange(n) * 100_000_000, view)
     est = refine_candidates(cand, cfg)
@@ -613,6 +624,62 @@ def test_motion_is_not_carried_on_into_open_view_where_the_drone_would_have_been
     assert np.linalg.norm(held[-1] - last) < 0.3
     assert np.linalg.norm(carried[-1] - last) > 2.0
     assert np.linalg.norm(_walk_then_unseen(stopped, check_s=0.0)[0][-1] - last) > 2.0
+
+
+def test_a_track_whose_end_came_to_rest_there_is_held_even_where_it_could_have_gone_on() -> None:
+    # the drone walks along foliage at its own range: carried on, its path would lie behind
+    # leaves the whole way, so it could have gone on unseen. Where the static surface at its
+    # last place appeared after the track began (the spot was seen through before), it came to
+    # rest there and was learned: held. Where that surface was always there, carried on
+    from cldet.core.background import direction_cells
+
+    _, last = _walk_then_unseen({})
+    along = last + np.outer(np.linspace(0.0, 4.0, 41), [0.0, 1.0, 0.0])
+    cells, rng, _, _ = direction_cells(along.astype(np.float32), 2.0)
+    foliage = {int(c): float(r) - 0.2 for c, r in zip(cells, rng, strict=True)}
+    end_cell = int(cells[0])
+    foliage[end_cell] = float(rng[0])
+    carried, _ = _walk_then_unseen(foliage)
+    before, after = 5 * 100_000_000, 25 * 100_000_000  # the track is seen in scans 10-29
+    stayed, _ = _walk_then_unseen(foliage, onset={end_cell: after})
+    always, _ = _walk_then_unseen(foliage, onset={end_cell: before})
+    assert np.linalg.norm(carried[-1] - last) > 2.0
+    assert np.linalg.norm(stayed[-1] - last) < 0.3
+    assert np.linalg.norm(always[-1] - last) > 2.0
+    off, _ = _walk_then_unseen(foliage, onset={end_cell: after}, rest=False)
+    assert np.linalg.norm(off[-1] - last) > 2.0
+
+
+def test_the_background_warm_up_is_no_evidence_that_a_drone_was_not_there() -> None:
+    # a drone first detected in scan 3 in a straight transit at 3.5 m/s: carried back, its path
+    # lies in open view, and the scene at its first detection could hide a drone that hovered
+    # there (came_out: the warm-up learned it). If scans 0-2 could have shown it, not seeing it
+    # there contradicts the transit: held. Nothing is foreground during the warm-up (0.2 s: scans
+    # 0-1); the one scan left could have missed it: carried back
+    from cldet.core.background import StaticView
+    from cldet.core.estimator import _stop_unseen
+
+    cfg = load_config()
+    n, bc = 50, cfg.background
+    t_s = 0.1 * np.arange(n)
+    have = np.arange(n) >= 3
+    view = StaticView(
+        np.full(90 * 180, np.inf, np.float32), bc.cell_deg, bc.margin_m, bc.margin_fraction, -7.3
+    )
+    velocity = np.array([0.0, -3.5, 0.0])
+    ends = {
+        0: (np.array([10.0, 5.0, 2.0]), velocity, 3.0),
+        -1: (np.array([10.0, -11.0, 2.0]), velocity, 3.0),
+    }
+
+    def start_velocity(blind_scans: int) -> np.ndarray:
+        blind = np.arange(n) < blind_scans
+        return _stop_unseen(ends, t_s, have, blind, view, True, False, cfg.smoothing)[0][1]
+
+    assert not np.any(start_velocity(0))
+    warm_up = int(round(bc.bin_s / 0.1))
+    assert warm_up == 2
+    np.testing.assert_array_equal(start_velocity(warm_up), velocity)
 
 
 def _protection(
