@@ -15,9 +15,11 @@ iteration.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -69,22 +71,32 @@ class TreeEnsemble:
         """Trees per boosting iteration: 1 for two classes, one per class otherwise."""
         return len(self.baseline)
 
+    @functools.cached_property
+    def _flat(self) -> tuple[NDArray[Any], ...]:
+        """Every tree's nodes in one set of arrays (children as indices into them), each
+        tree's root and the score column it adds to: one compiled walk evaluates them all."""
+        sizes = [len(t["leaf"]) for t in self.trees]
+        offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        cat = {c: np.concatenate([t[c] for t in self.trees]) for c in _COLUMNS}
+        shift = np.repeat(offsets, sizes)
+        return (
+            offsets,
+            np.arange(len(self.trees), dtype=np.int64) % self.per_iteration,
+            cat["feature"],
+            cat["threshold"],
+            cat["missing_left"],
+            cat["left"] + shift,
+            cat["right"] + shift,
+            cat["leaf"],
+            cat["value"],
+        )
+
     def raw_scores(self, x: NDArray[np.floating]) -> F64:
         """(N, K) the raw scores of the rows of ``x`` (N, n_features)."""
-        x = np.asarray(x, dtype=np.float64).reshape(-1, self.n_features)
-        out = np.tile(self.baseline, (len(x), 1))
-        rows = np.arange(len(x))
-        k = self.per_iteration
-        for i, t in enumerate(self.trees):
-            node = np.zeros(len(x), dtype=np.int64)
-            active = ~t["leaf"][node]
-            while active.any():
-                n = node[active]
-                v = x[rows[active], t["feature"][n]]
-                go_left = np.where(np.isnan(v), t["missing_left"][n], v <= t["threshold"][n])
-                node[active] = np.where(go_left, t["left"][n], t["right"][n])
-                active = ~t["leaf"][node]
-            out[:, i % k] += t["value"][node]
+        rows = np.ascontiguousarray(np.reshape(x, (-1, self.n_features)), dtype=np.float64)
+        out = np.tile(self.baseline, (len(rows), 1))
+        roots, column, feature, threshold, missing_left, left, right, leaf, value = self._flat
+        _walk(rows, roots, column, feature, threshold, missing_left, left, right, leaf, value, out)
         return out
 
     def predict_proba(self, x: NDArray[np.floating]) -> F64:
@@ -137,6 +149,33 @@ class TreeEnsemble:
         if n_features < 1 or not trees or len(trees) % len(baseline):
             raise ValueError(f"{len(trees)} trees for {len(baseline)} per iteration")
         return cls(classes, baseline, n_features, tuple(trees))
+
+
+@numba.njit(cache=True)
+def _walk(
+    x: F64,
+    roots: NDArray[np.int64],
+    column: NDArray[np.int64],
+    feature: NDArray[np.int64],
+    threshold: F64,
+    missing_left: NDArray[np.bool_],
+    left: NDArray[np.int64],
+    right: NDArray[np.int64],
+    leaf: NDArray[np.bool_],
+    value: F64,
+    out: F64,
+) -> None:  # pragma: no cover - compiled
+    """Add each tree's leaf value for each row of ``x`` to its column of ``out``, in tree
+    order (scikit-learn's sum). Children always come after their node (``_check_tree``), so
+    every walk ends."""
+    for r in range(x.shape[0]):
+        for t in range(roots.shape[0]):
+            node = roots[t]
+            while not leaf[node]:
+                v = x[r, feature[node]]
+                go_left = missing_left[node] if np.isnan(v) else v <= threshold[node]
+                node = left[node] if go_left else right[node]
+            out[r, column[t]] += value[node]
 
 
 def _check_tree(t: dict[str, NDArray[Any]], n_features: int) -> None:
