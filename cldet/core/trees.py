@@ -1,4 +1,4 @@
-"""Gradient-boosted trees as plain arrays: evaluated with numpy, stored as JSON.
+"""Gradient-boosted trees as plain arrays: evaluated by one compiled walk, stored as JSON.
 
 ``cldet train`` fits scikit-learn's ``HistGradientBoostingClassifier``; what it learned is a
 sum of small regression trees. :class:`TreeEnsemble` holds those trees as flat arrays (one row
