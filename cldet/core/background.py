@@ -453,7 +453,7 @@ class BackgroundModel:
         )
 
     def onsets(self) -> NDArray[np.int64]:
-        """(n_el * n_az,) per cell, the end of the first bin of the window in which its static
+        """(n_el * n_az,) per cell, the start of the first bin of the window in which its static
         surface was seen, where before it the sensors saw through that spot: a farther return
         in at least ``_ONSET_SEEN_THROUGH`` bins, or none in so many bins that a surface there,
         hit at its rate since, would have been hit (``1 - _ONSET_CONFIDENCE`` chance); else

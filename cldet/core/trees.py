@@ -26,7 +26,17 @@ from numpy.typing import NDArray
 __all__ = ["TreeEnsemble"]
 
 F64 = NDArray[np.float64]
-_COLUMNS = ("feature", "threshold", "missing_left", "left", "right", "leaf", "value")
+# a tree's node arrays, in the JSON's column order, with their types
+_DTYPES: dict[str, Any] = {
+    "feature": np.int64,
+    "threshold": np.float64,
+    "missing_left": bool,
+    "left": np.int64,
+    "right": np.int64,
+    "leaf": bool,
+    "value": np.float64,
+}
+_COLUMNS = tuple(_DTYPES)
 
 
 @dataclass(frozen=True)
@@ -48,17 +58,8 @@ class TreeEnsemble:
         for iteration in clf._predictors:
             for tree in iteration:
                 nodes = tree.nodes
-                trees.append(
-                    {
-                        "feature": nodes["feature_idx"].astype(np.int64),
-                        "threshold": nodes["num_threshold"].astype(np.float64),
-                        "missing_left": nodes["missing_go_to_left"].astype(bool),
-                        "left": nodes["left"].astype(np.int64),
-                        "right": nodes["right"].astype(np.int64),
-                        "leaf": nodes["is_leaf"].astype(bool),
-                        "value": nodes["value"].astype(np.float64),
-                    }
-                )
+                names = ("feature_idx", "num_threshold", "missing_go_to_left", "left", "right")
+                trees.append(_tree([nodes[n] for n in (*names, "is_leaf", "value")]))
         return cls(
             classes_=np.asarray(clf.classes_, dtype=np.int64),
             baseline=np.asarray(clf._baseline_prediction, dtype=np.float64).ravel(),
@@ -131,15 +132,7 @@ class TreeEnsemble:
             n_features = int(data["n_features"])
             trees = []
             for raw in data["trees"]:
-                t = {
-                    "feature": np.asarray(raw[0], dtype=np.int64),
-                    "threshold": np.asarray(raw[1], dtype=np.float64),
-                    "missing_left": np.asarray(raw[2], dtype=bool),
-                    "left": np.asarray(raw[3], dtype=np.int64),
-                    "right": np.asarray(raw[4], dtype=np.int64),
-                    "leaf": np.asarray(raw[5], dtype=bool),
-                    "value": np.asarray(raw[6], dtype=np.float64),
-                }
+                t = _tree([raw[k] for k in range(len(_COLUMNS))])
                 _check_tree(t, n_features)
                 trees.append(t)
         except (KeyError, IndexError, TypeError) as exc:
@@ -149,6 +142,11 @@ class TreeEnsemble:
         if n_features < 1 or not trees or len(trees) % len(baseline):
             raise ValueError(f"{len(trees)} trees for {len(baseline)} per iteration")
         return cls(classes, baseline, n_features, tuple(trees))
+
+
+def _tree(columns: list[Any]) -> dict[str, NDArray[Any]]:
+    """One tree's node arrays from its columns in ``_COLUMNS`` order, typed."""
+    return {c: np.asarray(v, dtype=_DTYPES[c]) for c, v in zip(_COLUMNS, columns, strict=True)}
 
 
 @numba.njit(cache=True)
