@@ -374,7 +374,7 @@ def report_probes(rows: list[dict[str, Any]], methods: Sequence[str]) -> None:
     """Failures out of the probe's sequences, per probe and method."""
     print(f"\nprobes on the original simulator: failures (RMS > {FAIL_RMS_M} m) / sequences")
     print(f"  {'probe':16s}" + "".join(f" {m:>22s}" for m in methods))
-    for probe in PROBES:
+    for probe in (p for p in PROBES if any(r["probe"] == p for r in rows)):
         cells = []
         for method in methods:
             mine = [r for r in rows if r["probe"] == probe and r["method"] == method]
@@ -434,7 +434,13 @@ def main(argv: list[str] | None = None) -> None:
         "--resume", action="store_true", help="keep the rows already in --json, run the rest"
     )
     parser.add_argument(
-        "--probes", action="store_true", help="the probes on the original simulator"
+        "--probes",
+        nargs="?",
+        const=",".join(PROBES),
+        default=None,
+        metavar="NAMES",
+        help="the probes on the original simulator: all, or the comma-separated NAMES among"
+        f" {', '.join(PROBES)}",
     )
     parser.add_argument(
         "--probe-seeds",
@@ -463,7 +469,11 @@ def main(argv: list[str] | None = None) -> None:
     jobs: list[Job] = []
     if args.probes:
         seeds = args.probe_seeds or parse_seeds(EVALUATION_PROBES)
-        for probe in PROBES:
+        names = args.probes.split(",")
+        unknown = [n for n in names if n not in PROBES]
+        if unknown:
+            parser.error(f"unknown probe(s) {', '.join(unknown)}: expected {', '.join(PROBES)}")
+        for probe in names:
             duration = PROBE_DURATION_S.get(probe, args.probe_duration)
             for scenario in SCENARIOS:
                 for seed in seeds:
