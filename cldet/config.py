@@ -289,6 +289,13 @@ class TrackingConfig(BaseModel):
         ge=0,
         description="clusters this close to the field's bottom may reach the ground (0: off)",
     )
+    ground_mover_max_m: float = Field(
+        default=2.5,
+        gt=0,
+        description="the tallest thing that moves on the ground (people, cars, vans), metres: a"
+        " cluster cut by the field's bottom this high above the local ground or higher cannot be"
+        " one reaching down to the ground (from a mast the field's edge passes metres up)",
+    )
     link_max_gap_s: float = Field(
         default=8.0, gt=0, description="longest unseen gap bridged between tracks"
     )

@@ -428,7 +428,7 @@ class BackgroundModel:
         self._around = self._static  # the nearest static range in each cell and its 8
         self._slack = np.zeros(n_cells, dtype=np.float32)  # extra margin (grazing surfaces)
         self.floating_cells = 0  # cells released as floating blobs at the last refresh
-        self.ground = GroundModel()
+        self.ground = GroundModel(field_bottom_deg=field_bottom_deg)
         self.n_frames = 0
         self._last_points = np.zeros((0, 3), dtype=np.float32)  # the last frame counted
 

@@ -381,9 +381,13 @@ class TrackEstimator:
         bottom = np.column_stack([centroid[:, :2], lo[:, 2]])
         may_continue = self.background.hidden_below(bottom)
         if tc.fov_cut_m > 0:
-            # cut by the bottom of the Mid-360's field of view (the sensor's own frame)
+            # cut by the bottom of the Mid-360's field of view (the sensor's own frame), where
+            # that edge passes low enough for a ground mover to reach up through it
             horiz = np.hypot(bottom[:, 0], bottom[:, 1])
-            may_continue |= bottom[:, 2] <= self._fov_tan * horiz + tc.fov_cut_m
+            with np.errstate(invalid="ignore"):
+                may_continue |= (bottom[:, 2] <= self._fov_tan * horiz + tc.fov_cut_m) & ~(
+                    height >= tc.ground_mover_max_m
+                )
         return np.where(may_continue & np.isfinite(height), 0.0, height)
 
     def _account(

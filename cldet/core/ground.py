@@ -13,6 +13,13 @@ sensor, on a slope, on a rooftop. So nothing assumes a level sensor or one groun
    local ground under a query point is the lowest cell within one cell of it (walls and roofs
    whose foot is hidden do not raise it; the street below a roof edge lowers it), and the plane
    itself (height 0) where no static return was seen.
+3. **Only where the ground could be seen.** A cell counts in the map only where the plane
+   under it is inside the field of view (its elevation in the sensor's own frame is at or above
+   ``field_bottom_deg``). Below the field's lower edge a static thing's lowest return is just
+   where the view ends, not what it stands on: from a mast 5 m up the Mid-360 (lowest
+   elevation -7 deg) first sees the ground 40 m out, and nearer than that a hedge, a car or a
+   drone hovering at the edge of the view would otherwise become its own ground. There the
+   plane is the ground.
 
 ``height_above(points)`` is then the height of each point above the local ground, metres.
 Before the first fit (the background's warm-up) heights are NaN: unknown, never guessed.
@@ -37,8 +44,12 @@ _MAX_POINTS = 4000  # RANSAC subsample
 class GroundModel:
     """Ground plane and height map, refitted from static points; ``height_above`` queries it."""
 
-    def __init__(self, max_tilt_deg: float = 35.0, seed: int = 0) -> None:
+    def __init__(
+        self, max_tilt_deg: float = 35.0, seed: int = 0, field_bottom_deg: float = -90.0
+    ) -> None:
+        """``field_bottom_deg``: the lowest elevation the sensors see, in their own frame."""
         self.max_tilt_deg = max_tilt_deg
+        self.field_bottom_deg = field_bottom_deg
         self._rng = np.random.default_rng(seed)
         self.normal: NDArray[np.float64] | None = None  # (3,) unit "up", sensor frame
         self.offset = 0.0  # height of the sensor origin above the plane, metres
@@ -100,6 +111,7 @@ class GroundModel:
         i, j, inside = self._cells(p)
         grid = np.full(self._n * self._n, np.inf)
         np.minimum.at(grid, i[inside] * self._n + j[inside], height[inside])
+        grid[~self._ground_in_view()] = np.inf
         # the local ground of a cell: the lowest height within one cell of it
         self._map = ndimage.minimum_filter(grid.reshape(self._n, self._n), size=3, mode="nearest")
         return True
@@ -111,6 +123,18 @@ class GroundModel:
         ij = np.floor((uv + _HALF_EXTENT_M) / _CELL_M).astype(np.int64)
         inside = np.all((ij >= 0) & (ij < self._n), axis=1)
         return ij[:, 0], ij[:, 1], inside
+
+    def _ground_in_view(self) -> NDArray[np.bool_]:
+        """(n * n,) whether the plane under each map cell's centre is inside the field of view."""
+        assert self.normal is not None
+        centres = (np.arange(self._n) + 0.5) * _CELL_M - _HALF_EXTENT_M
+        u, v = np.meshgrid(centres, centres, indexing="ij")
+        # the plane's point under (u, v): the in-plane axes, and the foot of the sensor origin
+        foot = -self.offset * self.normal
+        pts = foot + u.reshape(-1, 1) * self._axes[0] + v.reshape(-1, 1) * self._axes[1]
+        rng = np.linalg.norm(pts, axis=1)
+        sin_bottom = np.sin(np.radians(self.field_bottom_deg))
+        return np.asarray(pts[:, 2] >= sin_bottom * rng)
 
     def plane_height(self, points: NDArray[np.floating]) -> NDArray[np.float64]:
         """Height of each point (N,3) above the ground plane, metres (NaN before a fit)."""

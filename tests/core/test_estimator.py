@@ -401,6 +401,39 @@ def test_a_cluster_cut_by_the_bottom_of_the_field_of_view_may_reach_the_ground()
     assert off._heights((person, drone))[0] == pytest.approx(z_cut + 1.5, abs=0.05)
 
 
+def test_from_a_mast_a_cluster_cut_high_above_the_ground_is_no_ground_mover() -> None:
+    # a sensor 5 m up: the field's bottom edge passes 3.8 m above the ground 9 m out, higher
+    # than anything that moves on the ground reaches; a drone cut there keeps its height
+    est = TrackEstimator(load_config())
+    rng = np.random.default_rng(1)
+    r = np.sqrt(rng.uniform(40.0**2, 80.0**2, 3000))
+    az = rng.uniform(-np.pi, np.pi, 3000)
+    ground = np.stack([r * np.cos(az), r * np.sin(az), np.full(3000, -5.0)], axis=1)
+    assert est.background.ground.fit(ground)
+    z_cut = np.tan(np.radians(-7.3)) * 9.0 + 0.05
+    drone = Cluster(
+        0,
+        np.array([9.0, 0.0, z_cut + 0.1]),
+        np.array([8.8, -0.2, z_cut]),
+        np.array([9.2, 0.2, z_cut + 0.2]),
+        4,
+    )
+    # 30 m out the edge passes 1.2 m up: a person's head and shoulders there may reach down
+    z_far = np.tan(np.radians(-7.3)) * 30.0 + 0.05
+    person = Cluster(
+        1,
+        np.array([30.0, 0.0, z_far + 0.3]),
+        np.array([29.8, -0.2, z_far]),
+        np.array([30.2, 0.2, z_far + 0.6]),
+        8,
+    )
+    heights = est._heights((drone, person))
+    np.testing.assert_allclose(heights, [z_cut + 5.0, 0.0], atol=0.05)
+    tall = TrackEstimator(load_config(overrides={"tracking": {"ground_mover_max_m": 10.0}}))
+    tall.background.ground.fit(ground)
+    assert tall._heights((drone, person))[0] == 0.0
+
+
 def test_a_frame_flooded_with_speckle_gives_at_most_max_clusters() -> None:
     rng = np.random.default_rng(0)
     empty = np.zeros((0, 3), np.float32)

@@ -65,3 +65,28 @@ def test_no_plane_from_points_above_the_sensor_only() -> None:
     assert not model.fit(rng.uniform([-5, -5, 1], [5, 5, 3], (500, 3)))
     assert not model.fit(np.zeros((2, 3)))
     assert not model.fitted
+
+
+def test_where_the_ground_is_below_the_field_of_view_the_plane_is_the_ground() -> None:
+    # a sensor on a mast 5 m up sees the ground (lowest elevation -7.3 deg) from ~39 m out; a
+    # hedge 15 m away shows only its part above the field's edge, ~3.1 m above the ground
+    rng = np.random.default_rng(5)
+    r = np.sqrt(rng.uniform(40.0**2, 80.0**2, 4000))
+    az = rng.uniform(-np.pi, np.pi, 4000)
+    ground = np.stack([r * np.cos(az), r * np.sin(az), np.full(4000, -5.0)], axis=1)
+    edge = np.tan(np.radians(-7.3)) * 15.0
+    hedge = np.stack(
+        [np.full(300, 15.0), rng.uniform(-3, 3, 300), rng.uniform(edge, edge + 0.5, 300)], axis=1
+    )
+    above_hedge = np.array([[15.0, 0.0, -1.0]])  # 4 m above the ground
+    blind = GroundModel(field_bottom_deg=-7.3)
+    assert blind.fit(np.concatenate([ground, hedge]))
+    assert blind.height_above(above_hedge)[0] == pytest.approx(4.0, abs=0.1)
+    # told nothing of the field of view, the hedge's lowest return passes for the ground
+    naive = GroundModel()
+    assert naive.fit(np.concatenate([ground, hedge]))
+    assert naive.height_above(above_hedge)[0] < 1.0
+    # where the ground is in view the map still holds: a sunken lot 2 m down, 60-70 m out
+    lot = np.stack([rng.uniform(60, 70, 400), rng.uniform(-5, 5, 400), np.full(400, -7.0)], 1)
+    assert blind.fit(np.concatenate([ground, lot]))
+    assert blind.height_above(np.array([[65.0, 0.0, -6.0]]))[0] == pytest.approx(1.0, abs=0.1)
