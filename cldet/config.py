@@ -112,6 +112,16 @@ class BackgroundConfig(BaseModel):
         description="static = reached in at least this fraction of the window's bins (swaying"
         " foliage that fills a direction part of the time stays background)",
     )
+    seen_through_bins: int = Field(
+        default=2,
+        ge=0,
+        le=600,
+        description="... unless that range is gone: nothing returned at or before it in each of"
+        " the last this many bins (farther returns or none) and it does not recur (see"
+        " recurrent_bins). A drone receding along its line of sight always lies behind its own"
+        " earlier ranges, which the fraction above would keep as static; a wall recurs, swaying"
+        " foliage comes back to its range (0: off)",
+    )
     recurrent_bins: int = Field(
         default=3,
         ge=0,

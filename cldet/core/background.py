@@ -21,6 +21,11 @@ ray. The model is a static range image, learned causally (only the past is used)
    step 6, in at least ``recurrent_bins`` (3) of the window's bins. A thin or far structure
    (a pole, a wire, a branch 30 m out) is hit only now and then, but always at its own range;
    rain and passing things do not come back to one range in one direction.
+   A range that is gone is dropped: where the last ``seen_through_bins`` (2) bins returned
+   nothing at or before it (farther returns, or none in a cell hit in nearly every bin, a solid
+   surface) and it does not recur, the k-th smallest is no surface. A drone receding along its
+   line of sight, there since the window began, is always behind its own earlier ranges, and
+   would otherwise be learned as its own background; a wall recurs, swaying foliage comes back.
    A drone that stops and hovers would become background after a few seconds: the estimator
    withholds the points of confirmed small moving tracks from ``update`` (``protect_tracks``),
    so what was seen arriving is never learned as environment.
@@ -72,6 +77,7 @@ CORE = np.uint8(2)  # at or behind the static range of its own cell
 # two ranges in one cell belong to the same surface when within max(1 m, 10 %): the clearance
 # the floating-blob rule uses, far above range noise and foliage depth
 _SAME_SURFACE_M = 1.0
+_SOLID_FRACTION = 0.8  # a cell hit in this share of the window's bins holds a solid surface
 NO_ONSET = np.iinfo(np.int64).min  # a static surface there as long as the window remembers
 _ONSET_SEEN_THROUGH = 2  # bins with a farther return that show a spot was empty before
 _ONSET_CONFIDENCE = 0.95  # ... or bins without any return, at the surface's own hit rate
@@ -519,11 +525,30 @@ class BackgroundModel:
         kth = np.full(len(self._seen), np.inf, dtype=np.float32)
         window = self._ring[seen, :b]
         kth[seen] = np.partition(window, k - 1, axis=1)[:, k - 1] if b > 1 else window[:, 0]
+        recurrent = np.full(len(seen), np.inf, dtype=np.float32)
         if 0 < cfg.recurrent_bins <= b:
             recurrent = _recurrent_kernel(
                 window, cfg.recurrent_bins, float(cfg.margin_m), float(cfg.margin_fraction)
             )
-            kth[seen] = np.minimum(kth[seen], recurrent)
+        n_through = cfg.seen_through_bins
+        if 0 < n_through < b:
+            # gone: the last bins returned nothing at or before the k-th range (by the
+            # classification's own margin, a grazing surface's slack included), and that range
+            # does not recur (a cell holding two surfaces keeps its nearer one)
+            near = kth[seen]
+            margin = np.maximum(cfg.margin_m, cfg.margin_fraction * near)
+            margin = np.maximum(margin, self._slack[seen])
+            last = self._ring[:, (self.n_bins - 1 - np.arange(n_through)) % cfg.window_bins][seen]
+            through = np.all(last > (near + margin)[:, None], axis=1)
+            # ... seen through (farther returns), or empty where a solid surface was hit in
+            # nearly every bin (the sparse far ground misses whole bins and stays)
+            solid = np.mean(np.isfinite(window), axis=1) >= _SOLID_FRACTION
+            through &= np.all(np.isfinite(last), axis=1) | solid
+            with np.errstate(invalid="ignore"):
+                recurs = np.abs(window - near[:, None]) <= margin[:, None]
+            through &= np.sum(recurs, axis=1) < max(cfg.recurrent_bins, 1)
+            kth[seen[through]] = np.inf
+        kth[seen] = np.minimum(kth[seen], recurrent)
         static = kth.reshape(self._n_el, self._n_az)
         self.floating_cells = 0
         if cfg.floating_max_size_m > 0:

@@ -129,9 +129,14 @@ def test_swaying_foliage_of_a_few_cm_is_background() -> None:
 def test_core_against_the_wall() -> None:
     model = _learn([[]] * 20)
     pts = scan(np.random.default_rng(1))
-    wall = pts[:, 0] > 11.9
-    assert wall.sum() > 20
-    assert np.mean(model.classify(pts)[wall] == CORE) > 0.9
+    beyond = pts[:, 0] > 11.9
+    face = beyond & (pts[:, 0] < 13.1) & (np.abs(pts[:, 1]) <= 6.05) & (pts[:, 2] > GROUND_Z + 0.1)
+    assert face.sum() > 20
+    assert np.mean(model.classify(pts)[face] == CORE) > 0.95
+    # the ground beyond, 30-100 m out at a grazing angle, a return or two per cell and bin
+    far = beyond & ~face
+    assert far.sum() > 20
+    assert np.mean(model.classify(pts)[far] != FOREGROUND) > 0.95
 
 
 def _range_image(cells: dict[tuple[int, int], float]) -> np.ndarray:
@@ -312,3 +317,33 @@ def test_a_thin_structure_hit_now_and_then_is_background_and_rain_is_not() -> No
     # a drone 28 m out in the rain's direction is in front of no learned surface
     drone = (rain_dir * 28.0)[None, :].astype(np.float32)
     assert on.classify(drone)[0] == FOREGROUND
+
+
+def _receding(k: int) -> Sphere:
+    """A large drone (an M300's size) flying straight away from the sensor at 2.5 m/s, from 4 m
+    out."""
+    direction = np.array([0.8, 0.5, 0.33]) / np.linalg.norm([0.8, 0.5, 0.33])
+    return (tuple(direction * (4.0 + 0.25 * k)), 0.4)
+
+
+@pytest.mark.parametrize("through", [2, 0])
+def test_a_drone_receding_along_its_line_of_sight_is_not_behind_its_own_past(through: int) -> None:
+    # present from the first frame, it stays in the same directions: every earlier range there
+    # is its own, nearer; the k-th smallest of them is no surface once the sensors see farther.
+    # (The floating-blob rule is off: beside a structure it does not release a drone.)
+    rng = np.random.default_rng(6)
+    scans = [scan(rng, [_receding(k)], n_rays=40000, boxes=[POST]) for k in range(30)]
+    cfg = BackgroundConfig(seen_through_bins=through, floating_max_size_m=0.0)
+    model = _feed(BackgroundModel(cfg), scans)
+    pts = scan(np.random.default_rng(7), [_receding(31)], n_rays=40000, boxes=[POST])
+    on = points_near(pts, _receding(31)[0], 0.45)
+    assert on.sum() >= 10
+    # with the rule its own cells are free: only the dilation's margin (which the estimator
+    # reclaims near a protected mover) still covers it, from the cells at its rim
+    core = np.mean(model.classify(pts)[on] == CORE)
+    if through:
+        assert core == 0.0
+    else:
+        assert core > 0.5  # the rule switched off: behind its own earlier ranges
+    # the static scene stays background
+    assert np.mean(model.classify(pts)[~on] != FOREGROUND) > 0.99
