@@ -539,15 +539,18 @@ class BackgroundModel:
             margin = np.maximum(cfg.margin_m, cfg.margin_fraction * near)
             margin = np.maximum(margin, self._slack[seen])
             last = self._ring[:, (self.n_bins - 1 - np.arange(n_through)) % cfg.window_bins][seen]
-            through = np.all(last > (near + margin)[:, None], axis=1)
-            # ... seen through (farther returns), or empty where a solid surface was hit in
-            # nearly every bin (the sparse far ground misses whole bins and stays)
-            solid = np.mean(np.isfinite(window), axis=1) >= _SOLID_FRACTION
-            through &= np.all(np.isfinite(last), axis=1) | solid
             with np.errstate(invalid="ignore"):
-                recurs = np.abs(window - near[:, None]) <= margin[:, None]
+                idx = np.flatnonzero(np.all(last > (near + margin)[:, None], axis=1))
+            # ... seen through (farther returns), or empty where a solid surface was hit in
+            # nearly every bin (the sparse far ground misses whole bins and stays); only the
+            # few candidate cells' windows are read
+            rows = window[idx]
+            solid = np.mean(np.isfinite(rows), axis=1) >= _SOLID_FRACTION
+            through = np.all(np.isfinite(last[idx]), axis=1) | solid
+            with np.errstate(invalid="ignore"):
+                recurs = np.abs(rows - near[idx, None]) <= margin[idx, None]
             through &= np.sum(recurs, axis=1) < max(cfg.recurrent_bins, 1)
-            kth[seen[through]] = np.inf
+            kth[seen[idx[through]]] = np.inf
         kth[seen] = np.minimum(kth[seen], recurrent)
         static = kth.reshape(self._n_el, self._n_az)
         self.floating_cells = 0
