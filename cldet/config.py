@@ -400,14 +400,22 @@ class SmoothingConfig(BaseModel):
         ge=0,
         description="a run of detections is straight when a constant velocity fits it to this"
         " RMS residual, metres, plus the smear of a scan at the run's speed (0: never). Inertia:"
-        " beyond a straight run the extrapolation keeps the run's velocity for as long as the"
-        " run lasted, then decays",
+        " beyond a straight run the extrapolation keeps the run's velocity for straight_hold_factor"
+        " times as long as the run lasted, then decays",
     )
     straight_min_speed_mps: float = Field(
         default=3.0,
         ge=0,
         description="a straight run slower than this is a hover's drift or a manoeuvre, not a"
         " transit: its velocity is not held",
+    )
+    straight_hold_factor: float = Field(
+        default=2.0,
+        ge=0,
+        description="a straight run's velocity is held beyond the detections this many times as"
+        " long as the run was seen, then decays: a drone seen in transit for T seconds keeps"
+        " going after it fades out of reach (the refinement's negative evidence stops it where"
+        " it would have been seen; the causal estimate has none, so the hold stays bounded)",
     )
     straight_max_hold_s: float = Field(
         default=10.0,

@@ -36,8 +36,9 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    the estimate is that track's filtered state moved back from the points' time to the stamp.
    When the followed track is lost and no other is chosen, the estimate carries its motion on
    from the past alone (``_coast_from``): along the line of a straight run that ended it, held
-   as long as the run lasted, as the refinement does; else from the track's last state (the
-   tracker predicted it at constant velocity until it ended), the velocity decaying from then.
+   for ``smoothing.straight_hold_factor`` times as long as the run lasted, as the refinement
+   does; else from the track's last state (the tracker predicted it at constant velocity until
+   it ended), the velocity decaying from then.
 
 ``refine``: the candidate tracks plus the constant-velocity lines of sparse fast movers
 (``cldet.core.lines``, track-before-detect); the drone's chain of tracks chosen by
@@ -632,7 +633,7 @@ class TrackEstimator:
 
     def _coast_from(self, track_id: int, index: int) -> _Coast | None:
         """Where the causal estimate goes on from when the followed track is lost, from its
-        past alone: the line of a straight run that ends it, held as long as the run lasted
+        past alone: the line of a straight run that ends it, held for a multiple of the run
         (as the refinement extrapolates a track's end, ``_extrapolation_ends``), else its last
         filtered state (already predicted at constant velocity through the misses before the
         tracker ended it, so the decay starts later than the refinement's would)."""
@@ -818,7 +819,8 @@ def _extrapolation_ends(
     ``straight_min_speed_mps`` or more (a transit, not a hover), the run's own line: its
     position at the end detection's time and its velocity, fitted to the whole run (the
     smoother's end state rests on the last few detections, each smeared along the path by the
-    scan), held as long as the run lasted (at most ``straight_max_hold_s``).
+    scan), held ``straight_hold_factor`` times as long as the run lasted (at most
+    ``straight_max_hold_s``).
     ``scan_s``: how long a scan collects its points (the smear a fast drone leaves)."""
     ends = {0: (position[0], velocity[0], 0.0), -1: (position[-1], velocity[-1], 0.0)}
     if cfg.straight_rms_m <= 0:
@@ -830,7 +832,7 @@ def _extrapolation_ends(
             and run.duration_s > cfg.extrapolation_tau_s
             and float(np.linalg.norm(run.velocity)) >= cfg.straight_min_speed_mps
         ):
-            hold_s = min(run.duration_s, cfg.straight_max_hold_s)
+            hold_s = min(cfg.straight_hold_factor * run.duration_s, cfg.straight_max_hold_s)
             ends[key] = (run.position, sign * run.velocity, hold_s)
     return ends
 

@@ -591,6 +591,32 @@ def test_a_straight_pass_seen_only_midway_is_extrapolated_along_its_line() -> No
     assert refined > 3.0 and causal > 1.0
 
 
+def test_a_transit_seen_briefly_is_carried_on_for_longer_than_it_was_seen() -> None:
+    # the crossing above (15 m/s, 15 m out at its closest), seen in scans 38-55 only (1.7 s),
+    # then flying on out of reach for 2.4 s: a drone in transit keeps going; held only as long
+    # as it was seen, its velocity decays 1.5 s on and the end falls metres short
+    def drone(k: int) -> np.ndarray:
+        return np.array([15.0, -60.0 + 1.5 * k, 4.0])
+
+    n = 80
+    frames = _with_objects(4, n, lambda k: [(tuple(drone(k)), 0.25)] if 38 <= k <= 55 else [])
+    truth = np.array([drone(k) for k in range(n)])
+
+    def end_error(factor: float) -> float:
+        cfg = load_config(
+            overrides={
+                "smoothing": {"straight_hold_factor": factor},
+                "frames": {"scan_offset_s": 0.0},  # the test scene's scans are instantaneous
+            }
+        )
+        _, result = estimate_sequence(frames, cfg)
+        pos = np.array([e.position for e in result.estimates])
+        return float(np.max(np.linalg.norm(pos[-10:] - truth[-10:], axis=1)))
+
+    assert end_error(2.0) < 0.7
+    assert end_error(1.0) > 1.5
+
+
 def _walk_then_unseen(
     view_ranges: dict[int, float],
     check_s: float = 1.0,
