@@ -77,11 +77,11 @@ CORE = np.uint8(2)  # at or behind the static range of its own cell
 # two ranges in one cell belong to the same surface when within max(1 m, 10 %): the clearance
 # the floating-blob rule uses, far above range noise and foliage depth
 _SAME_SURFACE_M = 1.0
-_SOLID_FRACTION = 0.8  # a cell hit in this share of the window's bins holds a solid surface
 NO_ONSET = np.iinfo(np.int64).min  # a static surface there as long as the window remembers
 _ONSET_SEEN_THROUGH = 2  # bins with a farther return that show a spot was empty before
 _ONSET_CONFIDENCE = 0.95  # ... or bins without any return, at the surface's own hit rate
 _SAME_SURFACE_FRACTION = 0.1
+_SOLID_FRACTION = 0.8  # a cell hit in this share of the window's bins holds a solid surface
 # a floating blob may rest on a separate surface right below it this many cells wide (a pole or
 # post top: a drone hovering just above it)
 _MAX_SUPPORT_CELLS = 3
@@ -538,7 +538,8 @@ class BackgroundModel:
             near = kth[seen]
             margin = np.maximum(cfg.margin_m, cfg.margin_fraction * near)
             margin = np.maximum(margin, self._slack[seen])
-            last = self._ring[:, (self.n_bins - 1 - np.arange(n_through)) % cfg.window_bins][seen]
+            # the window's columns are the ring's first b slots, so the last bins are among them
+            last = window[:, (self.n_bins - 1 - np.arange(n_through)) % cfg.window_bins]
             with np.errstate(invalid="ignore"):
                 idx = np.flatnonzero(np.all(last > (near + margin)[:, None], axis=1))
             # ... seen through (farther returns), or empty where a solid surface was hit in
