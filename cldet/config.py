@@ -237,6 +237,14 @@ class TrackingConfig(BaseModel):
         " median for a second or more is rigidly fixed structure: a hovering drone wanders"
         " more (0: off)",
     )
+    fixed_sampling_factor: float = Field(
+        default=1.0,
+        ge=0,
+        description="... or within this many times the jitter that sampling alone gives a rigid"
+        " object's centroid (its largest edge / sqrt(12 points), median over the track): a sign"
+        " or a balcony 0.7 m across, sampled by 20 points a scan, jitters by 4 cm where a"
+        " hovering drone wanders by decimetres (0: fixed_spread_m alone)",
+    )
     prior_scorer: bool = Field(
         default=True,
         description="the refinement re-weighs the hand-set track factors by the drone"

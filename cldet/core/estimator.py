@@ -86,6 +86,8 @@ from cldet.core.selection import (
     TrackScorer,
     TrackWeigher,
     detection_weights,
+    fixed_spread,
+    sampling_jitter,
     score_tracks,
     select_chain,
 )
@@ -214,8 +216,17 @@ class _Evidence:
     mean_moved: float = 0.0  # largest edge of the box around those means, metres
     first_mean: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     displaced: float = 0.0  # from the first running mean to the latest, metres
+    jitter_sum: float = 0.0  # summed sampling jitter of the detections (selection.sampling_jitter)
 
-    def add(self, t_s: float, weight: float, position: NDArray[np.float64], both: bool) -> None:
+    def add(
+        self,
+        t_s: float,
+        weight: float,
+        position: NDArray[np.float64],
+        both: bool,
+        jitter_m: float = 0.0,
+    ) -> None:
+        self.jitter_sum += jitter_m
         if self.hits:
             self.weight += weight
         else:
@@ -249,7 +260,8 @@ class _Evidence:
         """Running evidence; "static" and "fixed" (see ``cldet.core.selection``: here the box
         around the running means, whose edge is about twice the spread) are judged once the
         track has lived ``causal_judge_s`` (when 0: ``_JUDGE_STATIC_S``, fixed
-        ``FIXED_JUDGE_S``)."""
+        ``FIXED_JUDGE_S``); the fixed spread grows to the detections' mean sampling jitter
+        times ``fixed_sampling_factor`` as in the refinement."""
         lived = self.lived
         factor = 1.0
         judge_fixed = cfg.causal_judge_s or FIXED_JUDGE_S
@@ -257,7 +269,7 @@ class _Evidence:
         if (
             lived >= judge_fixed
             and self.means > FIXED_MEAN_HITS
-            and self.mean_moved < 2.0 * cfg.fixed_spread_m
+            and self.mean_moved < 2.0 * fixed_spread(cfg, self.jitter_sum / self.hits)
         ):
             factor = cfg.fixed_factor
         elif lived >= judge_static and self.moved < 2.0 * cfg.static_spread_m:
@@ -420,11 +432,12 @@ class TrackEstimator:
                 table.crowds(),
             )
             both = (table.n_mid360 > 0) & (table.n_avia > 0)
+            jitter = sampling_jitter(table.extent, table.n_points)
             self._zones = {k: z for k, z in self._zones.items() if t_s - z[1] <= tc.max_miss_s}
             zone = self._zone_of(table) if protect else np.full(len(owner), -1)
             for j, tid in enumerate(owner.tolist()):
                 self._evidence.setdefault(tid, _Evidence()).add(
-                    t_s, float(w[j]), table.centroid[j], bool(both[j])
+                    t_s, float(w[j]), table.centroid[j], bool(both[j]), float(jitter[j])
                 )
                 if not protect:
                     continue
