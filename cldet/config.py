@@ -446,6 +446,14 @@ class SmoothingConfig(BaseModel):
         description="... 'could not have gone undetected': the chance of at least one detection"
         " along the carried-on path, from the track's own detection rate near that end",
     )
+    causal_straight_coast: bool = Field(
+        default=True,
+        description="causal: a frame the followed track misses is estimated along the line of"
+        " the straight run that ends its detections (as when the track is lost, and as the"
+        " refinement extrapolates), not from the tracker's filtered state: a sparse fast"
+        " pass's last few smeared detections pull the filter's velocity off by metres a"
+        " second; false: the filter's prediction until the track is lost",
+    )
     came_to_rest: bool = Field(
         default=True,
         description="a track whose end position became static while it was followed (the"

@@ -313,6 +313,8 @@ class TrackEstimator:
         # position, velocity), and, once it is lost, where the causal estimate coasts from
         self._state: tuple[float, NDArray[np.float64], NDArray[np.float64]] | None = None
         self._coast: _Coast | None = None
+        # the straight run ending a followed track, by (track, its last detection's frame)
+        self._run_coast: tuple[int, int, _Coast | None] | None = None
         self._causal: list[Estimate] = []
         # where protected movers were last seen: (position (3,), time s); a cluster there is
         # protected too (a hovering drone's track may end and restart without moving again)
@@ -581,20 +583,19 @@ class TrackEstimator:
             active.position[i].copy(),
             active.velocity[i].copy(),
         )
-        pos = active.position[i] - active.velocity[i] * self._offset_s
         f, c, _, _ = self._tracker.last_hit(best)
         seen = f == index
+        sigma = float(np.sqrt(max(active.pos_var[i], 0.0)))
+        if not seen and self.config.smoothing.causal_straight_coast:
+            run = self._straight_coast(best, f, index, sigma)
+            if run is not None:  # missed: a straight run's line carries on, as when lost
+                return self._coast_estimate(run, stamp_ns, index)
+        pos = active.position[i] - active.velocity[i] * self._offset_s
         n = 0
         if seen and c >= 0:
             n = int(self._tables[index].n_points[c])
         pos = apply_bias(pos[None, :], self.config.bias)[0]
-        return Estimate(
-            stamp_ns,
-            pos,
-            Source.DETECTED if seen else Source.PREDICTED,
-            n,
-            float(np.sqrt(max(active.pos_var[i], 0.0))),
-        )
+        return Estimate(stamp_ns, pos, Source.DETECTED if seen else Source.PREDICTED, n, sigma)
 
     def _learned_factor(self, track_id: int, hits: int) -> float:
         """The learned re-weighing of a track's running evidence (:class:`TrackWeigher`), as in
@@ -655,20 +656,47 @@ class TrackEstimator:
         t_state, position, velocity = self._state
         sigma_m = self._causal[-1].sigma_m
         rec = self._tracker.record(track_id)
-        if rec is not None:
+        if rec is not None and len(rec.frames):
+            run = self._straight_coast(track_id, int(rec.frames[-1]), index, sigma_m)
+            if run is not None:
+                return run
+        return _Coast(t_state, position, velocity, 0.0, sigma_m)
+
+    def _straight_coast(
+        self, track_id: int, last_frame: int, index: int, sigma_m: float
+    ) -> _Coast | None:
+        """The line of the straight run ending a track's detections (up to ``last_frame``),
+        held for a multiple of the run (``_extrapolation_ends``); None when no run of a transit
+        ends it. Computed once per track and last detection."""
+        cached = self._run_coast
+        if cached is not None and cached[:2] == (track_id, last_frame):
+            return cached[2]
+        run: _Coast | None = None
+        rec = self._tracker.record(track_id)
+        if rec is not None and len(rec.frames):
             t = self._times[rec.frames]
             scan_s = float(self._times[index] - self._times[index - 1]) if index else 0.0
+            p = rec.positions
             origin, v, hold_s = _extrapolation_ends(
-                t,
-                rec.positions,
-                position[None, :],
-                velocity[None, :],
-                scan_s,
-                self.config.smoothing,
+                t, p, p[-1:], np.zeros((1, 3)), scan_s, self.config.smoothing
             )[-1]
             if hold_s > 0.0:  # a straight run: from its line at its last detection
-                return _Coast(float(t[-1]), origin, v, hold_s, sigma_m)
-        return _Coast(t_state, position, velocity, 0.0, sigma_m)
+                run = _Coast(float(t[-1]), origin, v, hold_s, sigma_m)
+        self._run_coast = (track_id, last_frame, run)
+        return run
+
+    def _coast_estimate(self, c: _Coast, stamp_ns: int, index: int) -> Estimate:
+        """The estimate at a frame from a coast: its origin carried on at its velocity, held
+        ``hold_s`` and then decaying as the refinement's extrapolation does."""
+        sc = self.config.smoothing
+        dt = float(self._times[index]) - self._offset_s - c.t_s  # to the stamp's time
+        pos, var = extrapolate(
+            c.origin, c.velocity, np.zeros((2, 2)), dt, sc.accel_psd, sc.extrapolation_tau_s,
+            c.hold_s,
+        )  # fmt: skip
+        pos = apply_bias(pos[None, :], self.config.bias)[0]
+        sigma = float(np.hypot(c.sigma_m, np.sqrt(max(var, 0.0))))
+        return Estimate(stamp_ns, pos, Source.PREDICTED, 0, sigma)
 
     def _hold(self, stamp_ns: int, index: int) -> Estimate:
         """No track to follow: the lost track's motion carried on (``_coast_from``, its velocity
@@ -676,15 +704,7 @@ class TrackEstimator:
         else the fallback position."""
         c = self._coast
         if c is not None:
-            sc = self.config.smoothing
-            dt = float(self._times[index]) - self._offset_s - c.t_s  # to the stamp's time
-            pos, var = extrapolate(
-                c.origin, c.velocity, np.zeros((2, 2)), dt, sc.accel_psd, sc.extrapolation_tau_s,
-                c.hold_s,
-            )  # fmt: skip
-            pos = apply_bias(pos[None, :], self.config.bias)[0]
-            sigma = float(np.hypot(c.sigma_m, np.sqrt(max(var, 0.0))))
-            return Estimate(stamp_ns, pos, Source.PREDICTED, 0, sigma)
+            return self._coast_estimate(c, stamp_ns, index)
         if self._causal and self._causal[-1].source != Source.FALLBACK:
             last = self._causal[-1]
             dt = (stamp_ns - last.stamp_ns) / NS_PER_S
