@@ -380,6 +380,17 @@ class TrackingConfig(BaseModel):
         ge=0,
         description="lines slower than this are left to the Kalman tracker (m/s)",
     )
+    causal_line_every_s: float = Field(
+        default=0.5,
+        ge=0,
+        description="causal: while no track is followed, the line search runs this often over"
+        " the last causal_line_window_s; a line scoring causal_confirm or more is followed"
+        " along its fit, carried on as a straight transit (a sparse fast pass the Kalman"
+        " tracker cannot hold; 0: off)",
+    )
+    causal_line_window_s: float = Field(
+        default=3.0, gt=0, description="causal: the line search looks this far back"
+    )
     fallback_position: tuple[float, float, float] = Field(
         default=TRAINING_MEAN_POSITION_M, description="used only when no track exists at all"
     )

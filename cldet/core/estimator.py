@@ -34,11 +34,18 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    ``tracking.causal_judge_s``, from when on it is judged static or rigidly fixed: for its
    first second a still object, say a sign overhead, looks like a drone that just arrived);
    the estimate is that track's filtered state moved back from the points' time to the stamp.
-   When the followed track is lost and no other is chosen, the estimate carries its motion on
-   from the past alone (``_coast_from``): along the line of a straight run that ended it, held
-   for ``smoothing.straight_hold_factor`` times as long as the run lasted, as the refinement
-   does; else from the track's last state (the tracker predicted it at constant velocity until
-   it ended), the velocity decaying from then.
+   In a frame the followed track misses, the estimate follows the line of the straight run
+   that ends its detections, where one does (``smoothing.causal_straight_coast``: the filter
+   takes a sparse fast pass's smeared last detections as speed). When the followed track is
+   lost and no other is chosen, the estimate carries its motion on from the past alone
+   (``_coast_from``): along the line of a straight run that ended it, held for
+   ``smoothing.straight_hold_factor`` times as long as the run lasted, as the refinement does;
+   else from the track's last state (the tracker predicted it at constant velocity until it
+   ended), the velocity decaying from then. While no track is followed, the line search of
+   the refinement (``cldet.core.lines``) runs every ``tracking.causal_line_every_s`` over the
+   last ``tracking.causal_line_window_s`` (``_search_lines``): a line seen lately whose
+   evidence reaches ``causal_confirm`` is followed along its fit, as a lost straight track is.
+   A sparse fast pass, one return in a few scans, never makes a Kalman track to follow.
 
 ``refine``: the candidate tracks plus the constant-velocity lines of sparse fast movers
 (``cldet.core.lines``, track-before-detect); the drone's chain of tracks chosen by
@@ -97,6 +104,7 @@ from cldet.core.tracking import (
     CandidateTracker,
     ClusterTable,
     TrackRecord,
+    constant_velocity_fit,
     cross_section,
     crowding,
 )
@@ -315,6 +323,7 @@ class TrackEstimator:
         self._coast: _Coast | None = None
         # the straight run ending a followed track, by (track, its last detection's frame)
         self._run_coast: tuple[int, int, _Coast | None] | None = None
+        self._line_t = -np.inf  # when the causal line search last ran (s)
         self._causal: list[Estimate] = []
         # where protected movers were last seen: (position (3,), time s); a cluster there is
         # protected too (a hovering drone's track may end and restart without moving again)
@@ -575,6 +584,7 @@ class TrackEstimator:
             self._coast = self._coast_from(self._choice, index)
         self._choice = best
         if best is None:
+            self._search_lines(index)
             return self._hold(stamp_ns, index)
         i = row[best]
         self._coast = None
@@ -684,6 +694,45 @@ class TrackEstimator:
                 run = _Coast(float(t[-1]), origin, v, hold_s, sigma_m)
         self._run_coast = (track_id, last_frame, run)
         return run
+
+    def _search_lines(self, index: int) -> None:
+        """While no track is followed: every ``causal_line_every_s`` the line search
+        (``cldet.core.lines``) over the last ``causal_line_window_s``; the best line whose
+        running evidence (scored as the refinement scores tracks) reaches ``causal_confirm``,
+        and that was seen within the last ``line_seed_s``, becomes the coast: its fitted line
+        carried on (held as a straight transit where it is one)."""
+        tc = self.config.tracking
+        t_now = float(self._times[index])
+        if tc.causal_line_every_s <= 0 or t_now - self._line_t < tc.causal_line_every_s:
+            return
+        self._line_t = t_now
+        times = self._times[: index + 1]
+        i0 = int(np.searchsorted(times, t_now - tc.causal_line_window_s, side="left"))
+        lines = find_lines(
+            self._tables[i0 : index + 1], times[i0:], tc, -1, self._offset_s, t_now - tc.line_seed_s
+        )
+        if not lines:
+            return
+        lines = [replace(rec, frames=rec.frames + i0) for rec in lines]
+        scored = score_tracks(lines, self._tables, times, tc, self._weigher)
+        recent = [
+            tr
+            for tr in scored
+            if tr.score >= tc.causal_confirm and t_now - tr.times_s[-1] <= tc.line_seed_s
+        ]
+        if not recent:
+            return
+        line = max(recent, key=lambda tr: tr.score)
+        t, z = line.times_s, line.positions
+        if self._coast is not None and self._coast.t_s >= t[-1]:
+            return  # a lost track seen more recently already coasts
+        p0, v, tm = constant_velocity_fit(t, z)
+        at_end = p0 + v * (t[-1] - tm)
+        scan_s = float(times[index] - times[index - 1]) if index else 0.0
+        origin, velocity, hold_s = _extrapolation_ends(
+            t, z, at_end[None, :], v[None, :], scan_s, self.config.smoothing
+        )[-1]
+        self._coast = _Coast(float(t[-1]), origin, velocity, hold_s, tc.line_tol_m)
 
     def _coast_estimate(self, c: _Coast, stamp_ns: int, index: int) -> Estimate:
         """The estimate at a frame from a coast: its origin carried on at its velocity, held

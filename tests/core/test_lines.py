@@ -10,7 +10,7 @@ from cldet.config import load_config
 from cldet.core.lines import find_lines
 from cldet.core.methods import estimate_sequence
 from cldet.core.tracking import ClusterTable, TrackRecord
-from cldet.types import LidarFrame
+from cldet.types import LidarFrame, Source
 from tests.core.scene import scan
 
 PERIOD_S = 0.1
@@ -52,14 +52,11 @@ def _far_speckle(rng: np.random.Generator, n: int) -> NDArray[np.float64]:
     )
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_a_sparse_fast_pass_is_followed_only_with_the_line_search(seed: int) -> None:
-    # one Mid-360 return from the drone in about one scan out of five (a far small drone),
-    # lone far speckle every scan: the Kalman tracker never links two sightings (the drone moves
-    # 3-9 m between them), the line search does
+def _sparse_pass_frames(seed: int) -> tuple[list[LidarFrame], NDArray[np.float64]]:
+    """The scan of the test scene with lone far speckle every scan and, in about one scan out
+    of five, one Mid-360 return from the pass (a far small drone); and the pass at the stamps."""
     rng = np.random.default_rng(seed)
     stamps = np.arange(N_FRAMES, dtype=np.float64) * PERIOD_S
-    truth = _pass(stamps)
     frames = []
     empty = np.zeros((0, 3), np.float32)
     for t in stamps:
@@ -70,6 +67,14 @@ def test_a_sparse_fast_pass_is_followed_only_with_the_line_search(seed: int) -> 
                 _pass(np.array([t + rng.uniform(0.0, 0.1)], dtype=np.float64)).astype(np.float32)
             )
         frames.append(LidarFrame(int(round(t * 1e9)), np.concatenate(cloud), empty))
+    return frames, _pass(stamps)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_sparse_fast_pass_is_followed_only_with_the_line_search(seed: int) -> None:
+    # the Kalman tracker never links two sightings (the drone moves 3-9 m between them), the
+    # line search does
+    frames, truth = _sparse_pass_frames(seed)
 
     def rms(line_search: bool) -> float:
         # the straight transit's hold off: it can carry a short Kalman track along the pass and
@@ -139,3 +144,28 @@ def test_static_things_and_slow_movers_make_no_line() -> None:
     walker = np.array([10.0, 0.0, 0.0]) + np.outer(times, [0.0, 1.0, 0.0])
     assert _lines([walker[k : k + 1] for k in range(N_FRAMES)]) == []
     assert _lines([walker[k : k + 1] for k in range(N_FRAMES)], line_min_speed=0.5)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_causal_estimate_follows_a_sparse_fast_pass_with_the_line_search(seed: int) -> None:
+    # the same pass, estimated frame by frame: without a track to follow, the causal line
+    # search over the last 3 s finds it once its sightings there are evidence enough, and the
+    # estimate goes on along the line; without the search it reports the pass later (where two
+    # sightings happened to fall within the tracker's gate) or never
+    frames, truth = _sparse_pass_frames(seed)
+
+    def reported(every_s: float) -> NDArray[np.float64]:
+        cfg = load_config(overrides={"tracking": {"causal_line_every_s": every_s}})
+        _, result = estimate_sequence(frames, cfg)
+        return np.array(
+            [
+                float(np.linalg.norm(e.position - truth[k]))
+                for k, e in enumerate(result.causal)
+                if e.source != Source.FALLBACK
+            ]
+        )
+
+    found = reported(0.5)
+    assert len(found) >= 10
+    assert float(np.sqrt(np.mean(found**2))) < 1.0
+    assert len(reported(0.0)) < len(found)  # the search is needed here
