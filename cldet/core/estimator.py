@@ -680,20 +680,25 @@ class TrackEstimator:
         ends it. Computed once per track and last detection."""
         cached = self._run_coast
         if cached is not None and cached[:2] == (track_id, last_frame):
-            return cached[2]
-        run: _Coast | None = None
-        rec = self._tracker.record(track_id)
-        if rec is not None and len(rec.frames):
-            t = self._times[rec.frames]
-            scan_s = float(self._times[index] - self._times[index - 1]) if index else 0.0
-            p = rec.positions
-            origin, v, hold_s = _extrapolation_ends(
-                t, p, p[-1:], np.zeros((1, 3)), scan_s, self.config.smoothing
-            )[-1]
-            if hold_s > 0.0:  # a straight run: from its line at its last detection
-                run = _Coast(float(t[-1]), origin, v, hold_s, sigma_m)
-        self._run_coast = (track_id, last_frame, run)
-        return run
+            run = cached[2]
+        else:
+            run = None
+            rec = self._tracker.record(track_id)
+            if rec is not None and len(rec.frames):
+                t = self._times[rec.frames]
+                p = rec.positions
+                origin, v, hold_s = _extrapolation_ends(
+                    t, p, p[-1:], np.zeros((1, 3)), self._scan_s(index), self.config.smoothing
+                )[-1]
+                if hold_s > 0.0:  # a straight run: from its line at its last detection
+                    run = _Coast(float(t[-1]), origin, v, hold_s, sigma_m)
+            self._run_coast = (track_id, last_frame, run)
+        # the run is cached; the uncertainty it starts from is the caller's
+        return None if run is None else replace(run, sigma_m=sigma_m)
+
+    def _scan_s(self, index: int) -> float:
+        """How long the scan of frame ``index`` collected its points: a frame period."""
+        return float(self._times[index] - self._times[index - 1]) if index else 0.0
 
     def _search_lines(self, index: int) -> None:
         """While no track is followed: every ``causal_line_every_s`` the line search
@@ -728,9 +733,8 @@ class TrackEstimator:
             return  # a lost track seen more recently already coasts
         p0, v, tm = constant_velocity_fit(t, z)
         at_end = p0 + v * (t[-1] - tm)
-        scan_s = float(times[index] - times[index - 1]) if index else 0.0
         origin, velocity, hold_s = _extrapolation_ends(
-            t, z, at_end[None, :], v[None, :], scan_s, self.config.smoothing
+            t, z, at_end[None, :], v[None, :], self._scan_s(index), self.config.smoothing
         )[-1]
         self._coast = _Coast(float(t[-1]), origin, velocity, hold_s, tc.line_tol_m)
 

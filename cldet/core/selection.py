@@ -38,8 +38,8 @@ each detection weighted by per-detection evidence and the track's factors:
   balcony corner 0.7 m across with 20 returns): the spread allowed grows to
   ``fixed_sampling_factor`` (1) times that. At 1 the rule catches about three in four rigid
   objects (its 90th percentile sits near the theory's); on the development worlds every drone
-  track of 2 s or more wandered at least 1.27 times its jitter, and 1.5 broke three hovers. The factor is far below the static one because this is near
-  certainty, not a likelihood: at 0.1 such a track of 80 detections still outweighed a drone
+  track of 2 s or more wandered at least 1.27 times its jitter, and 1.5 broke three hovers.
+  The factor is far below the static one because this is near certainty, not a likelihood: at 0.1 such a track of 80 detections still outweighed a drone
   hovering low beside a bush (0.1 for its height times 0.6 for static per detection);
 * motion consistency: a detection whose NIS exceeds 7.81 (the 95 % point of chi^2, 3 dof)
   weighs exp(-(NIS - 7.81) / 7.81): smooth motion keeps its weight, erratic speckle or a
@@ -84,9 +84,9 @@ __all__ = [
     "TrackScorer",
     "TrackWeigher",
     "detection_weights",
-    "score_tracks",
     "fixed_spread",
     "sampling_jitter",
+    "score_tracks",
     "select_chain",
 ]
 

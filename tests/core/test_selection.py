@@ -64,17 +64,19 @@ def test_a_rigid_object_is_fixed_within_its_sampling_jitter_and_a_hovering_drone
     # a balcony corner 0.7 m across, 20 returns a scan for 4 s: its centroid jitters by ~4 cm
     # with the parts each scan hits, more than the fixed 2.5 cm; a drone 0.3 m across (6
     # returns) hovering beside it wanders by 10 cm (its position controller, the wind)
-    from cldet.core.selection import _is_fixed, sampling_jitter
+    from cldet.core.selection import _is_fixed, fixed_spread, sampling_jitter
 
     rng = np.random.default_rng(0)
     t = np.arange(40) * 0.1
     still = np.tile([5.3, 0.0, 1.9], (40, 1))
+    tc = load_config().tracking
     rigid_jitter = float(np.median(sampling_jitter(np.full(40, 0.7), np.full(40, 20))))
     drone_jitter = float(np.median(sampling_jitter(np.full(40, 0.3), np.full(40, 6))))
     assert rigid_jitter == pytest.approx(0.7 / np.sqrt(240))
+    assert fixed_spread(tc, rigid_jitter) == pytest.approx(rigid_jitter)  # beyond 2.5 cm
     rigid = [_face_centroids(rng, still, 0.7, 20) for _ in range(200)]
     alone = np.mean([_is_fixed(t, r, 0.025) for r in rigid])
-    caught = np.mean([_is_fixed(t, r, max(0.025, rigid_jitter)) for r in rigid])
+    caught = np.mean([_is_fixed(t, r, fixed_spread(tc, rigid_jitter)) for r in rigid])
     assert alone < 0.1, alone  # 2.5 cm alone misses nearly all
     assert caught > 0.6, caught  # about three in four: the rule's p90 sits near the theory's
     drones = []
@@ -82,4 +84,4 @@ def test_a_rigid_object_is_fixed_within_its_sampling_jitter_and_a_hovering_drone
         phase = rng.uniform(0, 2 * np.pi, 3)
         wander = 0.1 * np.sin(np.outer(t, [1.3, 0.9, 2.1]) + phase)
         drones.append(_face_centroids(rng, still + [0.9, 0.2, 4.2] + wander, 0.3, 6))
-    assert not any(_is_fixed(t, d, max(0.025, drone_jitter)) for d in drones)
+    assert not any(_is_fixed(t, d, fixed_spread(tc, drone_jitter)) for d in drones)
