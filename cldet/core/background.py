@@ -162,6 +162,14 @@ def _margin(r: float, margin_m: float, margin_fraction: float) -> float:
     return max(margin_m, margin_fraction * r)
 
 
+def _margins(
+    r: NDArray[np.floating], margin_m: float, margin_fraction: float
+) -> NDArray[np.floating]:
+    """:func:`_margin` of each range of ``r`` (the numpy form, for the questions asked outside
+    the kernels)."""
+    return np.maximum(margin_m, margin_fraction * r)
+
+
 @numba.njit(cache=True)
 def _nearest_kernel(
     cells: NDArray[np.int64], rng: NDArray[np.float32], nearest: NDArray[np.float32]
@@ -379,7 +387,7 @@ class StaticView:
         cells, rng, _, _ = direction_cells(p, self.cell_deg)
         horiz = np.hypot(p[:, 0], p[:, 1])
         in_field = np.degrees(np.arctan2(p[:, 2], horiz)) >= self.bottom_deg + self.cell_deg
-        margin = np.maximum(self.margin_m, self.margin_fraction * rng)
+        margin = _margins(rng, self.margin_m, self.margin_fraction)
         return in_field & (rng + margin < self.around[cells])
 
     def screened(self, points: NDArray[np.floating]) -> NDArray[np.bool_]:
@@ -400,7 +408,7 @@ class StaticView:
         if self.static is None or self.onset_ns is None:
             return np.zeros(len(p), dtype=bool)
         cells, rng, _, _ = direction_cells(p, self.cell_deg)
-        margin = np.maximum(self.margin_m, self.margin_fraction * rng)
+        margin = _margins(rng, self.margin_m, self.margin_fraction)
         here = np.abs(self.static[cells] - rng) <= margin
         return here & (self.onset_ns[cells] >= since_ns)
 
@@ -473,7 +481,7 @@ class BackgroundModel:
         order = (np.arange(b) + (self.n_bins - b)) % cfg.window_bins  # oldest bin first
         ring = self._ring[cells][:, order]  # (C, b)
         static = self._static[cells, None]
-        margin = np.maximum(cfg.margin_m, cfg.margin_fraction * static)
+        margin = _margins(static, cfg.margin_m, cfg.margin_fraction)
         near = np.abs(ring - static) <= margin
         far = np.isfinite(ring) & (ring > static + margin)
         first = np.argmax(near, axis=1)  # the static surface is hit in some bin (k-th smallest)
@@ -536,7 +544,7 @@ class BackgroundModel:
             # classification's own margin, a grazing surface's slack included), and that range
             # does not recur (a cell holding two surfaces keeps its nearer one)
             near = kth[seen]
-            margin = np.maximum(cfg.margin_m, cfg.margin_fraction * near)
+            margin = _margins(near, cfg.margin_m, cfg.margin_fraction)
             margin = np.maximum(margin, self._slack[seen])
             # the window's columns are the ring's first b slots, so the last bins are among them
             last = window[:, (self.n_bins - 1 - np.arange(n_through)) % cfg.window_bins]
