@@ -32,9 +32,12 @@ ray. The model is a static range image, learned causally (only the past is used)
 4. A static object never floats: lamp posts, cars and trees stand on something. A small blob of
    static cells (3D extent at most ``floating_max_size_m``, less one cell's width: an object
    straddling the border of two cells is seen in both) whose neighbouring directions are
-   all empty or far from it in range (by max(1 m, 10 % of its range)), and at most half of them
-   nearer (occluding), is a drone hovering there since the warm-up, not environment: its cells
-   are cleared. Blobs are the 8-connected cells whose static ranges differ by at most
+   all empty, behind it on a separate surface (not range-continuous with it: free space lies
+   between, as between a drone and the wall or canopy a few metres behind it), or in front of
+   it by max(1 m, 10 % of its range), and at most half of them nearer (occluding), is a drone
+   hovering there since the warm-up, not environment: its cells are cleared. Only a nearer
+   neighbour needs the wider clearance: a surface seen at a grazing angle steps towards the
+   sensor across cells, and may be the visible part of what holds the blob. Blobs are the 8-connected cells whose static ranges differ by at most
    max(0.5 m, 5 %). One exception to the clearance: right below the blob, up to three cells of a
    separate surface (not range-continuous with it) may be nearer than the clearance: a drone
    hovering a metre above a post top is seen with the top in the next cell down. A lamp head
@@ -339,6 +342,8 @@ def _floating_blobs(
                         rn = static[ee, aa]
                         if not np.isfinite(rn):
                             continue
+                        if rn > r and not _continuous(r, rn):
+                            continue  # a separate surface behind it: free space in between
                         if abs(rn - r) < clearance:
                             if de == -1 and not _continuous(r, rn):
                                 # right below, a separate surface: what it hovers over,
