@@ -32,12 +32,13 @@ ray. The model is a static range image, learned causally (only the past is used)
 4. A static object never floats: lamp posts, cars and trees stand on something. A small blob of
    static cells (3D extent at most ``floating_max_size_m``, less one cell's width: an object
    straddling the border of two cells is seen in both) whose neighbouring directions are
-   all empty, behind it on a separate surface (not range-continuous with it: free space lies
-   between, as between a drone and the wall or canopy a few metres behind it), or in front of
-   it by max(1 m, 10 % of its range), and at most half of them nearer (occluding), is a drone
-   hovering there since the warm-up, not environment: its cells are cleared. Only a nearer
-   neighbour needs the wider clearance: a surface seen at a grazing angle steps towards the
-   sensor across cells, and may be the visible part of what holds the blob. Blobs are the 8-connected cells whose static ranges differ by at most
+   all empty or far from it in range (by max(1 m, 10 % of its range)), and at most half of
+   them nearer (occluding), is a drone hovering there since the warm-up, not environment: its
+   cells are cleared. A blob that stands in front of everything around it (no neighbour is
+   nearer) needs only a separate surface behind it (not range-continuous with it: free space
+   lies between, as between a drone and the wall 1-2 m behind it); the wider clearance is for
+   surfaces seen at a grazing angle, which step away from the sensor on one side and towards
+   it on the other (the ground far out: nearer cells below, farther above). Blobs are the 8-connected cells whose static ranges differ by at most
    max(0.5 m, 5 %). One exception to the clearance: right below the blob, up to three cells of a
    separate surface (not range-continuous with it) may be nearer than the clearance: a drone
    hovering a metre above a post top is seen with the top in the next cell down. A lamp head
@@ -299,7 +300,19 @@ def _floating_blobs(
                             comp[ee, aa] = n_comp
                             stack[top, 0], stack[top, 1] = ee, aa
                             top += 1
-            # judge the component
+            # judge the component; does it stand in front of everything around it (a range
+            # minimum on every side)? A surface seen at a grazing angle has nearer cells below
+            standing_out = True
+            for k in range(m):
+                e, a = members[k, 0], members[k, 1]
+                for de in (-1, 0, 1):
+                    ee = e + de
+                    if ee < 0 or ee >= n_el:
+                        continue
+                    for da in (-1, 0, 1):
+                        aa = (a + da) % n_az
+                        if comp[ee, aa] != n_comp and static[ee, aa] < static[e, a]:
+                            standing_out = False
             ok = True
             n_border = 0
             n_nearer = 0
@@ -342,7 +355,7 @@ def _floating_blobs(
                         rn = static[ee, aa]
                         if not np.isfinite(rn):
                             continue
-                        if rn > r and not _continuous(r, rn):
+                        if standing_out and rn > r and not _continuous(r, rn):
                             continue  # a separate surface behind it: free space in between
                         if abs(rn - r) < clearance:
                             if de == -1 and not _continuous(r, rn):

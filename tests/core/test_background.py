@@ -176,6 +176,22 @@ def test_a_blob_in_front_of_a_separate_surface_floats() -> None:
     assert not _floats(_range_image(front | drone)).any()
 
 
+def test_a_fragment_of_ground_seen_at_a_grazing_angle_does_not_float() -> None:
+    """Uneven ground far out, a return or two per cell, so that only some cells are static: a
+    static fragment 20 m out has the ground of the row above 7 % farther (more than one
+    surface's continuity, less than the 10 % clearance) and the row below 30 % nearer. The
+    ground above is a separate surface behind it, as the wall behind a hovering drone is, but
+    the fragment does not stand in front of everything around it (the ground below is
+    nearer): the wider clearance applies, and it is ground, not a floating blob."""
+    fragment = {(40, 90): 20.0, (40, 91): 20.1}
+    above = {(41, a): 21.4 for a in range(80, 100)}
+    below = {(39, a): 14.0 for a in range(80, 100)}
+    assert not _floats(_range_image(fragment | above | below)).any()
+    # the same fragment with the ground below it as far as above: it stands out, and floats
+    level = {(39, a): 21.4 for a in range(80, 100)}
+    assert all(_floats(_range_image(fragment | above | level))[c] for c in fragment)
+
+
 def test_a_blob_continuous_with_the_pole_or_beside_a_surface_does_not_float() -> None:
     drone = {(66, 100): 8.7, (66, 101): 8.6, (65, 100): 8.9}
     # a lamp head: range-continuous with its pole, one blob that is not small
