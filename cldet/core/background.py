@@ -7,6 +7,10 @@ ray. The model is a static range image, learned causally (only the past is used)
 1. Directions from the sensor origin are cut into cells of ``cell_deg`` (2 deg) in azimuth and
    elevation (in the sensor's own frame: a tilted mount changes nothing here). A 2 deg cell is
    ~7 cm wide at 2 m and ~0.7 m at 20 m: it gets about one return per scan from a surface.
+   An azimuth column narrows as cos(elevation): above 60 deg a row's columns are grouped
+   into cells at most ``cell_deg`` wide (``azimuth_groups``). Without that, a surface right
+   above a sensor looking up (the Avia's boresight) falls into slivers hit now and then, is
+   never learned, and its returns scatter as foreground: a "track" straight overhead.
 2. Time is cut into bins of ``bin_s`` (0.2 s = 2 scans). For every cell the model keeps the
    nearest range seen in the current bin; a finished bin enters a ring of the last
    ``window_bins`` (30: 6 s). The first bin is the warm-up: nothing is foreground before it
@@ -62,6 +66,7 @@ a plane and a height map, never one number, so that tilted mounts, slopes and ro
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numba
@@ -105,8 +110,41 @@ def direction_cells(
     n_az = int(round(360.0 / cell_deg))
     n_el = int(np.ceil(180.0 / cell_deg))
     p = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
-    cells, rng = _cells_kernel(p, float(cell_deg), n_az, n_el)
+    cells, rng = _cells_kernel(p, float(cell_deg), n_az, n_el, azimuth_groups(cell_deg))
     return cells, rng, n_el, n_az
+
+
+@functools.cache
+def azimuth_groups(cell_deg: float) -> NDArray[np.int64]:
+    """(n_el,) per elevation row, how many azimuth columns make one cell.
+
+    An azimuth column spans ``cell_deg * cos(elevation)`` of arc: near the zenith (the Avia's
+    boresight) a column is a sliver hit only now and then, so a static surface overhead is never
+    learned and its returns scatter as foreground. A row's columns are grouped so that a cell
+    is at most ``cell_deg`` wide at the row's edge nearest the horizon (a divisor of the column
+    count, so groups tile the row); a group's first column holds the cell.
+    """
+    n_az = int(round(360.0 / cell_deg))
+    n_el = int(np.ceil(180.0 / cell_deg))
+    lo = np.arange(n_el) * cell_deg - 90.0
+    nearest = np.minimum(np.abs(lo), np.abs(lo + cell_deg))  # the row's edge nearest the horizon
+    nearest = np.where(lo * (lo + cell_deg) < 0, 0.0, nearest)  # a row spanning the horizon
+    widest = np.floor(1.0 / np.maximum(np.cos(np.radians(nearest)), 1e-9) + 1e-9)
+    divisors = np.array([d for d in range(1, n_az + 1) if n_az % d == 0])
+    out = np.array([divisors[divisors <= w].max() for w in widest], dtype=np.int64)
+    out.setflags(write=False)
+    return out
+
+
+def pool_groups(image: NDArray[np.float32], groups: NDArray[np.int64]) -> NDArray[np.float32]:
+    """(n_el, n_az) image with each row's groups of columns (``azimuth_groups``) set to their
+    minimum: one cell's value on every column of it, so neighbour operations see whole cells."""
+    out = image.copy()
+    n_az = image.shape[1]
+    for e in np.flatnonzero(groups > 1):
+        g = int(groups[e])
+        out[e] = np.repeat(image[e].reshape(n_az // g, g).min(axis=1), g)
+    return out
 
 
 @numba.njit(cache=True, inline="always")
@@ -130,7 +168,7 @@ def _atan2(y: float, x: float) -> float:
 
 @numba.njit(cache=True)
 def _cells_kernel(
-    points: NDArray[np.float32], cell_deg: float, n_az: int, n_el: int
+    points: NDArray[np.float32], cell_deg: float, n_az: int, n_el: int, groups: NDArray[np.int64]
 ) -> tuple[NDArray[np.int64], NDArray[np.float32]]:
     n = points.shape[0]
     cells = np.empty(n, dtype=np.int64)
@@ -143,7 +181,8 @@ def _cells_kernel(
         ia = int((_atan2(y, x) + np.pi) * scale) % n_az
         ie = int((_atan2(z, h) + np.pi / 2) * scale)
         ie = min(max(ie, 0), n_el - 1)
-        cells[i] = ie * n_az + ia
+        g = groups[ie]
+        cells[i] = ie * n_az + (ia // g) * g
     return cells, rng
 
 
@@ -493,7 +532,7 @@ class BackgroundModel:
         cfg = self.cfg
         b = min(self.n_bins, cfg.window_bins)
         out = np.full(len(self._static), NO_ONSET, dtype=np.int64)
-        cells = np.flatnonzero(np.isfinite(self._static))
+        cells = np.flatnonzero(np.isfinite(self._static) & self._seen)  # a group's own column
         if b < 2 or not len(cells):
             return out
         order = (np.arange(b) + (self.n_bins - b)) % cfg.window_bins  # oldest bin first
@@ -579,7 +618,8 @@ class BackgroundModel:
             through &= np.sum(recurs, axis=1) < max(cfg.recurrent_bins, 1)
             kth[seen[idx[through]]] = np.inf
         kth[seen] = np.minimum(kth[seen], recurrent)
-        static = kth.reshape(self._n_el, self._n_az)
+        groups = azimuth_groups(self.cfg.cell_deg)
+        static = pool_groups(kth.reshape(self._n_el, self._n_az), groups)
         self.floating_cells = 0
         if cfg.floating_max_size_m > 0:
             floating = _floating_blobs(
@@ -601,10 +641,13 @@ class BackgroundModel:
         if cfg.dilate_cells > 0:
             size = 2 * cfg.dilate_cells + 1
             dilated = ndimage.minimum_filter(static, size=size, mode=("nearest", "wrap"))
+            dilated = pool_groups(dilated, groups)
         self._static = np.ascontiguousarray(static, dtype=np.float32).ravel()
         self._dilated = np.ascontiguousarray(dilated, dtype=np.float32).ravel()
         if cfg.dilate_cells != 1:
-            dilated = ndimage.minimum_filter(static, size=3, mode=("nearest", "wrap"))
+            dilated = pool_groups(
+                ndimage.minimum_filter(static, size=3, mode=("nearest", "wrap")), groups
+            )
         self._around = np.ascontiguousarray(dilated, dtype=np.float32).ravel()
         # the ground from the last frame's returns on static surfaces (real points: a cell's
         # centre at its nearest range sits above a ground seen at a grazing angle)

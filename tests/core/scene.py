@@ -38,13 +38,20 @@ def scan(
     wall: bool = True,
     el_range_deg: tuple[float, float] = (-7.0, 52.0),
     boxes: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
+    even: bool = False,
 ) -> NDArray[np.float32]:
     """One scan: random directions in the elevation band, nearest hit, 2 cm range noise.
 
-    ``boxes`` are extra axis-aligned boxes (lower corner, upper corner).
+    ``boxes`` are extra axis-aligned boxes (lower corner, upper corner). Directions are uniform
+    in elevation (dense at the zenith) or, ``even``, uniform over the sphere as a Livox pattern
+    covers its field of view.
     """
     az = rng.uniform(-np.pi, np.pi, n_rays)
-    el = np.radians(rng.uniform(*el_range_deg, n_rays))
+    lo, hi = np.radians(el_range_deg)
+    if even:
+        el = np.arcsin(rng.uniform(np.sin(lo), np.sin(hi), n_rays))
+    else:
+        el = rng.uniform(lo, hi, n_rays)
     d = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=1)
     with np.errstate(divide="ignore"):
         t = np.where(d[:, 2] < 0, GROUND_Z / d[:, 2], np.inf)
