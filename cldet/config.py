@@ -131,6 +131,17 @@ class BackgroundConfig(BaseModel):
         " (a pole, a wire, a branch 30 m out) returns the same range each time, rain and passing"
         " things do not (0: off)",
     )
+    polar_cell_width: float = Field(
+        default=0.25,
+        ge=0,
+        le=1,
+        description="near the zenith, azimuth columns narrow as cos(elevation): where one is"
+        " narrower than this fraction of cell_deg, columns are grouped into cells at least this"
+        " wide (and at most cell_deg). The Avia, looking up, puts about 4.6 times the"
+        " Mid-360's returns on a steradian, so a quarter-width cell there is hit as often as a"
+        " full one at the horizon; slivers are hit now and then and a surface overhead is never"
+        " learned (0: off)",
+    )
     dilate_cells: int = Field(
         default=1, ge=0, le=3, description="grow the static range by this many cells"
     )

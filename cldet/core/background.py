@@ -7,10 +7,14 @@ ray. The model is a static range image, learned causally (only the past is used)
 1. Directions from the sensor origin are cut into cells of ``cell_deg`` (2 deg) in azimuth and
    elevation (in the sensor's own frame: a tilted mount changes nothing here). A 2 deg cell is
    ~7 cm wide at 2 m and ~0.7 m at 20 m: it gets about one return per scan from a surface.
-   An azimuth column narrows as cos(elevation): above 60 deg a row's columns are grouped
-   into cells at most ``cell_deg`` wide (``azimuth_groups``). Without that, a surface right
-   above a sensor looking up (the Avia's boresight) falls into slivers hit now and then, is
-   never learned, and its returns scatter as foreground: a "track" straight overhead.
+   An azimuth column narrows as cos(elevation): where it is narrower than
+   ``polar_cell_width`` (a quarter) of a cell, a row's columns are grouped into cells about
+   that wide (``azimuth_groups``; above ~76 deg). The Avia, looking up, puts ~4.6 times the
+   Mid-360's returns on a steradian, so such a cell is hit as often as a full one at the
+   horizon. Without that, a surface right above a sensor looking up (the Avia's boresight)
+   falls into slivers hit now and then, is never learned, and its returns scatter as
+   foreground: a "track" straight overhead. Wider cells would also hold a drone present from
+   the start in its own learned trail for longer.
 2. Time is cut into bins of ``bin_s`` (0.2 s = 2 scans). For every cell the model keeps the
    nearest range seen in the current bin; a finished bin enters a ring of the last
    ``window_bins`` (30: 6 s). The first bin is the warm-up: nothing is foreground before it
@@ -79,6 +83,7 @@ from cldet.core.ground import GroundModel
 
 __all__ = ["CORE", "FOREGROUND", "MARGIN", "BackgroundModel", "StaticView", "direction_cells"]
 
+_POLAR_WIDTH = float(BackgroundConfig.model_fields["polar_cell_width"].default)
 FOREGROUND = np.uint8(0)  # in front of the static environment
 MARGIN = np.uint8(1)  # background only through dilation
 CORE = np.uint8(2)  # at or behind the static range of its own cell
@@ -99,7 +104,7 @@ _GROUND_EVERY_BINS = 5  # the ground is refitted every this many bins (it does n
 
 
 def direction_cells(
-    points: NDArray[np.floating], cell_deg: float
+    points: NDArray[np.floating], cell_deg: float, polar_width: float = _POLAR_WIDTH
 ) -> tuple[NDArray[np.int64], NDArray[np.float32], int, int]:
     """Direction cell of each point (N,3) and its range.
 
@@ -110,28 +115,36 @@ def direction_cells(
     n_az = int(round(360.0 / cell_deg))
     n_el = int(np.ceil(180.0 / cell_deg))
     p = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
-    cells, rng = _cells_kernel(p, float(cell_deg), n_az, n_el, azimuth_groups(cell_deg))
+    groups = azimuth_groups(float(cell_deg), float(polar_width))
+    cells, rng = _cells_kernel(p, float(cell_deg), n_az, n_el, groups)
     return cells, rng, n_el, n_az
 
 
 @functools.cache
-def azimuth_groups(cell_deg: float) -> NDArray[np.int64]:
+def azimuth_groups(cell_deg: float, polar_width: float) -> NDArray[np.int64]:
     """(n_el,) per elevation row, how many azimuth columns make one cell.
 
     An azimuth column spans ``cell_deg * cos(elevation)`` of arc: near the zenith (the Avia's
     boresight) a column is a sliver hit only now and then, so a static surface overhead is never
-    learned and its returns scatter as foreground. A row's columns are grouped so that a cell
-    is at most ``cell_deg`` wide at the row's edge nearest the horizon (a divisor of the column
-    count, so groups tile the row); a group's first column holds the cell.
+    learned and its returns scatter as foreground. Where a column at the row's centre is
+    narrower than ``polar_width`` (a fraction of ``cell_deg``), the fewest columns that reach
+    that width make one cell, never wider than ``cell_deg`` at the row's edge nearest the
+    horizon (a divisor of the column count, so groups tile the row); a group's first column
+    holds the cell. ``polar_width`` 0: every row keeps its columns.
     """
     n_az = int(round(360.0 / cell_deg))
     n_el = int(np.ceil(180.0 / cell_deg))
     lo = np.arange(n_el) * cell_deg - 90.0
+    centre = np.cos(np.radians(lo + 0.5 * cell_deg))
     nearest = np.minimum(np.abs(lo), np.abs(lo + cell_deg))  # the row's edge nearest the horizon
     nearest = np.where(lo * (lo + cell_deg) < 0, 0.0, nearest)  # a row spanning the horizon
     widest = np.floor(1.0 / np.maximum(np.cos(np.radians(nearest)), 1e-9) + 1e-9)
     divisors = np.array([d for d in range(1, n_az + 1) if n_az % d == 0])
-    out = np.array([divisors[divisors <= w].max() for w in widest], dtype=np.int64)
+    out = np.ones(n_el, dtype=np.int64)
+    for e in range(n_el):
+        fits = divisors[divisors <= widest[e]]
+        wide = fits[fits * centre[e] >= polar_width]
+        out[e] = wide.min() if len(wide) else fits.max()
     out.setflags(write=False)
     return out
 
@@ -435,13 +448,14 @@ class StaticView:
     # there as far as the window remembers); None where not computed (``view(onset=True)``)
     static: NDArray[np.float32] | None = None
     onset_ns: NDArray[np.int64] | None = None
+    polar_width: float = _POLAR_WIDTH  # see ``azimuth_groups``
 
     def open(self, points: NDArray[np.floating]) -> NDArray[np.bool_]:
         """(N,) the points lie in the sensors' field of view and in front of every static
         surface of their direction and the 8 around by the background's margin: a drone there
         returns foreground (with the default dilation of one cell)."""
         p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
-        cells, rng, _, _ = direction_cells(p, self.cell_deg)
+        cells, rng, _, _ = direction_cells(p, self.cell_deg, self.polar_width)
         horiz = np.hypot(p[:, 0], p[:, 1])
         in_field = np.degrees(np.arctan2(p[:, 2], horiz)) >= self.bottom_deg + self.cell_deg
         margin = _margins(rng, self.margin_m, self.margin_fraction)
@@ -452,7 +466,7 @@ class StaticView:
         around, no farther behind it than two surfaces can be told apart (max(1 m, 10 %)):
         something static there hides it, or it is itself learned as static."""
         p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
-        cells, rng, _, _ = direction_cells(p, self.cell_deg)
+        cells, rng, _, _ = direction_cells(p, self.cell_deg, self.polar_width)
         reach = np.maximum(_SAME_SURFACE_M, _SAME_SURFACE_FRACTION * rng)
         return self.around[cells] <= rng + reach
 
@@ -464,7 +478,7 @@ class StaticView:
         p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
         if self.static is None or self.onset_ns is None:
             return np.zeros(len(p), dtype=bool)
-        cells, rng, _, _ = direction_cells(p, self.cell_deg)
+        cells, rng, _, _ = direction_cells(p, self.cell_deg, self.polar_width)
         margin = _margins(rng, self.margin_m, self.margin_fraction)
         here = np.abs(self.static[cells] - rng) <= margin
         return here & (self.onset_ns[cells] >= since_ns)
@@ -521,6 +535,7 @@ class BackgroundModel:
             self._field_bottom_deg,
             self._static if onset else None,
             self.onsets() if onset else None,
+            float(cfg.polar_cell_width),
         )
 
     def onsets(self) -> NDArray[np.int64]:
@@ -578,7 +593,7 @@ class BackgroundModel:
         if len(points) == 0:
             return
         self._last_points = np.asarray(points)
-        cells, rng, _, _ = direction_cells(points, self.cfg.cell_deg)
+        cells, rng, _, _ = direction_cells(points, self.cfg.cell_deg, self.cfg.polar_cell_width)
         _nearest_kernel(cells, rng, self._current)
 
     def _refresh(self) -> None:
@@ -618,7 +633,7 @@ class BackgroundModel:
             through &= np.sum(recurs, axis=1) < max(cfg.recurrent_bins, 1)
             kth[seen[idx[through]]] = np.inf
         kth[seen] = np.minimum(kth[seen], recurrent)
-        groups = azimuth_groups(self.cfg.cell_deg)
+        groups = azimuth_groups(float(cfg.cell_deg), float(cfg.polar_cell_width))
         static = pool_groups(kth.reshape(self._n_el, self._n_az), groups)
         self.floating_cells = 0
         if cfg.floating_max_size_m > 0:
@@ -670,7 +685,7 @@ class BackgroundModel:
             return np.zeros(0, dtype=np.uint8)
         if not self.warm:
             return np.full(len(points), CORE, dtype=np.uint8)
-        cells, rng, _, _ = direction_cells(points, self.cfg.cell_deg)
+        cells, rng, _, _ = direction_cells(points, self.cfg.cell_deg, self.cfg.polar_cell_width)
         return self._labels(cells, rng)
 
     def _labels(self, cells: NDArray[np.int64], rng: NDArray[np.float32]) -> NDArray[np.uint8]:
@@ -703,7 +718,9 @@ class BackgroundModel:
         el = np.arctan2(p[:, 2], h) - np.radians(self.cfg.cell_deg)
         scale = np.where(h > 0, r * np.cos(el) / np.maximum(h, 1e-9), 0.0)
         probe = np.stack([p[:, 0] * scale, p[:, 1] * scale, r * np.sin(el)], axis=1)
-        cells, rng, _, _ = direction_cells(probe.astype(np.float32), self.cfg.cell_deg)
+        cells, rng, _, _ = direction_cells(
+            probe.astype(np.float32), self.cfg.cell_deg, self.cfg.polar_cell_width
+        )
         hidden = self._labels(cells, rng) != FOREGROUND
         # ... by the ground: a drone hovering over a car or a pole top has them right below
         behind = self._dilated[cells].astype(np.float64)  # the nearest static surface around
