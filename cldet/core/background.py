@@ -593,7 +593,7 @@ class BackgroundModel:
         if len(points) == 0:
             return
         self._last_points = np.asarray(points)
-        cells, rng, _, _ = direction_cells(points, self.cfg.cell_deg, self.cfg.polar_cell_width)
+        cells, rng = self._cells(points)
         _nearest_kernel(cells, rng, self._current)
 
     def _refresh(self) -> None:
@@ -685,8 +685,13 @@ class BackgroundModel:
             return np.zeros(0, dtype=np.uint8)
         if not self.warm:
             return np.full(len(points), CORE, dtype=np.uint8)
-        cells, rng, _, _ = direction_cells(points, self.cfg.cell_deg, self.cfg.polar_cell_width)
+        cells, rng = self._cells(points)
         return self._labels(cells, rng)
+
+    def _cells(self, points: NDArray[np.floating]) -> tuple[NDArray[np.int64], NDArray[np.float32]]:
+        """``direction_cells`` of points (N,3) on this model's grid: cell indices and ranges."""
+        cells, rng, _, _ = direction_cells(points, self.cfg.cell_deg, self.cfg.polar_cell_width)
+        return cells, rng
 
     def _labels(self, cells: NDArray[np.int64], rng: NDArray[np.float32]) -> NDArray[np.uint8]:
         """FOREGROUND / MARGIN / CORE of returns at these cells and ranges."""
@@ -718,9 +723,7 @@ class BackgroundModel:
         el = np.arctan2(p[:, 2], h) - np.radians(self.cfg.cell_deg)
         scale = np.where(h > 0, r * np.cos(el) / np.maximum(h, 1e-9), 0.0)
         probe = np.stack([p[:, 0] * scale, p[:, 1] * scale, r * np.sin(el)], axis=1)
-        cells, rng, _, _ = direction_cells(
-            probe.astype(np.float32), self.cfg.cell_deg, self.cfg.polar_cell_width
-        )
+        cells, rng = self._cells(probe.astype(np.float32))
         hidden = self._labels(cells, rng) != FOREGROUND
         # ... by the ground: a drone hovering over a car or a pole top has them right below
         behind = self._dilated[cells].astype(np.float64)  # the nearest static surface around
