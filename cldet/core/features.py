@@ -60,20 +60,28 @@ FEATURE_NAMES: Final[tuple[str, ...]] = (
     "spread_p90_m",  # 90th percentile distance to the median position
     "net_motion_m",  # constant-velocity fit's displacement over the span
     "path_m",  # summed step lengths (with net_motion: does it go anywhere)
+    # the airframe's box from detections of 2 points or more, each edge scaled by (n+1)/(n-1):
+    # n points spread evenly over a segment span (n-1)/(n+1) of it on average, so the scaled
+    # edge estimates the segment's length whatever the range and the point count
+    "size_z_est_m",  # median vertical edge so scaled
+    "size_xy_est_m",  # median larger horizontal edge so scaled
+    "aspect_med",  # median vertical / larger horizontal edge (the scaling cancels): flat or tall
 )
 
 TYPE_FEATURES: Final[tuple[str, ...]] = (
     "log_cross_med",
     "log_cross_p90",
     "elevation_sin_med",
-    "size_z_p90_m",
-    "size_xy_p90_m",
+    "size_z_est_m",
+    "size_xy_est_m",
+    "aspect_med",
     "log_range_med",
     "log_mid_avia_med",
 )
 """The features the drone-type classifier reads: what the airframe's size changes (the area
-that returned the points, seen from which side; the box the points span, and at what range the
-scan resolves it), and what its surface's reflectivity changes (the two LiDARs' detection ranges
+that returned the points, seen from which side; the box the points span, corrected for how
+many points spanned it, and its shape: a Mavic 3 is flat, 0.11 m tall for 0.35 m long, a
+Phantom 4 of the same footprint is 0.19 m tall), and what its surface's reflectivity changes (the two LiDARs' detection ranges
 differ, about 40 m against 190 m on a dark target, so the Mid-360's share of the returns falls
 with range sooner on a dark airframe than on a white one); not how it moves, which says more
 about the flight than about the airframe."""
@@ -174,6 +182,7 @@ def track_features(
         path = float(np.linalg.norm(np.diff(pos, axis=0), axis=1).sum())
     else:
         net = path = 0.0
+    z_est, xy_est, aspect = _box_estimates(det, n, cl)
     return np.array(
         [
             np.log1p(n),
@@ -207,6 +216,29 @@ def track_features(
             float(np.percentile(np.linalg.norm(pos - centre, axis=1), 90)),
             net,
             path,
+            z_est,
+            xy_est,
+            aspect,
         ],
         dtype=np.float64,
+    )
+
+
+def _box_estimates(
+    det: TrackDetections, n: int, cl: NDArray[np.bool_]
+) -> tuple[float, float, float]:
+    """Median vertical and larger horizontal box edges of the first ``n`` detections (those of
+    clusters, ``cl``, with 2 points or more), each scaled by (n+1)/(n-1) for its point count,
+    and the median ratio of the two (NaN: no such detection)."""
+    pts = det.n_mid360[:n] + det.n_avia[:n]
+    ok = cl & (pts >= 2)
+    if not ok.any():
+        return float("nan"), float("nan"), float("nan")
+    scale = (pts[ok] + 1.0) / (pts[ok] - 1.0)
+    z = det.size[:n][ok, 2]
+    xy = np.max(det.size[:n][ok, :2], axis=1)
+    return (
+        _nanmedian(z * scale),
+        _nanmedian(xy * scale),
+        _nanmedian(z / np.maximum(xy, 1e-3)),
     )

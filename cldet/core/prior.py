@@ -44,21 +44,29 @@ class PriorScorer:
     trees: TreeEnsemble
     floor: float
     info: dict[str, Any]
+    # the features it was trained on, in its trees' column order: a subset of FEATURE_NAMES
+    feature_names: tuple[str, ...] = FEATURE_NAMES
 
     def drone_probability(self, features: NDArray[np.float64]) -> NDArray[np.float64]:
         """(T,) the probability that each track (features (T, len(FEATURE_NAMES))) is the
         drone."""
         if len(features) == 0:
             return np.zeros(0)
-        return self.trees.predict_proba(features)[:, 1]
+        columns = [FEATURE_NAMES.index(n) for n in self.feature_names]
+        return self.trees.predict_proba(features[:, columns])[:, 1]
 
 
-def prior_json(trees: TreeEnsemble, floor: float, info: dict[str, Any]) -> dict[str, Any]:
-    """The file's contents for ``json.dump``."""
+def prior_json(
+    trees: TreeEnsemble,
+    floor: float,
+    info: dict[str, Any],
+    feature_names: tuple[str, ...] = FEATURE_NAMES,
+) -> dict[str, Any]:
+    """The file's contents for ``json.dump`` (``feature_names``: the trees' columns)."""
     return {
         "kind": "cldet-prior-scorer",
         "format": PRIOR_FORMAT,
-        "feature_names": list(FEATURE_NAMES),
+        "feature_names": list(feature_names),
         "floor": float(floor),
         "info": info,
         "trees": trees.to_json(),
@@ -67,20 +75,30 @@ def prior_json(trees: TreeEnsemble, floor: float, info: dict[str, Any]) -> dict[
 
 def parse_prior(data: Any) -> PriorScorer:
     """The scorer of a :func:`prior_json` document; ValueError when it is not one of this
-    code's (another format, another feature list, corrupt trees)."""
+    code's (another format, a feature this code does not compute, corrupt trees).
+
+    A prior trained before features were added to :data:`FEATURE_NAMES` still reads: it names
+    the features it was trained on and scores those columns."""
     if not isinstance(data, dict) or data.get("kind") != "cldet-prior-scorer":
         raise ValueError("not a cldet prior scorer")
     if data.get("format") != PRIOR_FORMAT:
         raise ValueError(f"format {data.get('format')!r}, this code reads {PRIOR_FORMAT}")
-    if tuple(data.get("feature_names", ())) != FEATURE_NAMES:
-        raise ValueError("its feature list is not this code's: run benchmarks/train_prior.py")
+    names = data.get("feature_names", ())
+    if not isinstance(names, list) or not names:
+        raise ValueError("no feature list")
+    unknown = sorted(set(map(str, names)) - set(FEATURE_NAMES))
+    if unknown:
+        raise ValueError(
+            f"features this code does not compute ({', '.join(unknown)}):"
+            " run benchmarks/train_prior.py"
+        )
     trees = TreeEnsemble.from_json(data["trees"])
-    if trees.n_features != len(FEATURE_NAMES) or list(trees.classes_) != [0, 1]:
-        raise ValueError("not a binary drone-vs-clutter scorer over this code's features")
+    if trees.n_features != len(names) or list(trees.classes_) != [0, 1]:
+        raise ValueError("not a binary drone-vs-clutter scorer over its feature list")
     floor = float(data["floor"])
     if not 0.0 <= floor <= 1.0:
         raise ValueError(f"floor {floor} outside [0, 1]")
-    return PriorScorer(trees, floor, dict(data.get("info", {})))
+    return PriorScorer(trees, floor, dict(data.get("info", {})), tuple(map(str, names)))
 
 
 @functools.cache

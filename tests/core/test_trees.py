@@ -62,7 +62,8 @@ def test_a_corrupt_ensemble_is_refused_not_evaluated(corrupt: object) -> None:
 
 def test_the_packaged_prior_reads_this_codes_features_and_gives_probabilities() -> None:
     prior = load_prior()
-    assert prior.trees.n_features == len(FEATURE_NAMES)
+    assert prior.trees.n_features == len(prior.feature_names)
+    assert set(prior.feature_names) <= set(FEATURE_NAMES)
     assert 0.0 <= prior.floor < 1.0
     assert prior.info["worlds"] >= 100  # trained on many randomised development worlds
     p = prior.drone_probability(np.full((3, len(FEATURE_NAMES)), np.nan))
@@ -71,8 +72,28 @@ def test_the_packaged_prior_reads_this_codes_features_and_gives_probabilities() 
 
 
 def test_a_prior_of_other_features_or_format_is_refused() -> None:
-    doc = prior_json(load_prior().trees, 0.1, {})
+    prior = load_prior()
+    doc = prior_json(prior.trees, 0.1, {}, prior.feature_names)
     parse_prior(json.loads(json.dumps(doc)))
-    for change in ({"feature_names": list(FEATURE_NAMES[:-1])}, {"format": 99}, {"kind": "x"}):
+    for change in (
+        {"feature_names": list(prior.feature_names[:-1])},  # fewer names than the trees' columns
+        {"feature_names": [*prior.feature_names[:-1], "colour_of_the_sky"]},  # not computed here
+        {"feature_names": []},
+        {"format": 99},
+        {"kind": "x"},
+    ):
         with pytest.raises(ValueError):
             parse_prior({**doc, **change})
+
+
+def test_a_prior_trained_on_fewer_features_scores_its_own_columns() -> None:
+    """Features added to the code later do not invalidate a prior: it scores the columns it
+    names, wherever they now stand in the feature vector."""
+    prior = load_prior()
+    rng = np.random.default_rng(0)
+    own = rng.normal(0.0, 1.0, (50, len(prior.feature_names)))
+    full = np.full((50, len(FEATURE_NAMES)), 1e6)  # the columns it does not read: nonsense
+    full[:, [FEATURE_NAMES.index(n) for n in prior.feature_names]] = own
+    expected = prior.trees.predict_proba(own)[:, 1]
+    np.testing.assert_allclose(prior.drone_probability(full), expected)
+    assert len(set(np.round(expected, 6))) > 1  # the check can fail: the scores vary
