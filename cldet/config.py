@@ -329,6 +329,15 @@ class TrackingConfig(BaseModel):
         default=8.0, gt=0, description="longest unseen gap bridged between tracks"
     )
     link_speed: float = Field(default=10.0, gt=0, description="max mean speed across a bridged gap")
+    link_tail_ratio: float = Field(
+        default=0.25,
+        ge=0,
+        le=1,
+        description="a link may leave a track before the next one starts, dropping its tail, when"
+        " the tail's returns per detection average at most this fraction of the kept part's (a"
+        " track that lost the drone and coasted on single returns; 0: links leave at the next"
+        " track's start only)",
+    )
     raw_gate_m: float = Field(
         default=0.0,
         ge=0,

@@ -59,7 +59,13 @@ the following detections show); tracks of a single detection are not candidates.
 maximising the summed scores, where track A links to a later-starting track B if the jump
 from A's last detection before B starts to B's first is at most
 ``link_speed * gap + 1 m`` within ``link_max_gap_s``; A then counts only up to B's start, and
-each link costs 2 detections' worth. This is a dynamic programme over tracks sorted by start.
+each link costs 2 detections' worth. A track that followed the drone out of sight may coast on
+onto single returns that its gate happens to catch, leading away until the drone reappears
+farther from the tail's end than any speed allows: the link may then leave A at its latest
+detection from which the jump is possible, dropping the rest, but only when the dropped tail
+is weak (its returns per detection average at most ``link_tail_ratio`` of the kept part's). A
+steady track of something else keeps its returns to the end and cannot be cut to feed a drone
+track. This is a dynamic programme over tracks sorted by start.
 """
 
 from __future__ import annotations
@@ -287,6 +293,29 @@ def _hand_factor(
     return factor * (1.0 + 0.5 * float(np.mean(det.both)))
 
 
+def _link_cut(ta: ScoredTrack, t0: float, p0: NDArray[np.float64], cfg: TrackingConfig) -> int:
+    """How many of track ``ta``'s first hits a link to a track starting at time ``t0`` and
+    position ``p0`` keeps (0: no link; see the module docstring): all its hits before ``t0``
+    when the jump from the last of them is possible, else, when ``link_tail_ratio`` allows,
+    up to the latest hit from which it is, if the hits dropped are a weak tail."""
+    hi = int(np.searchsorted(ta.times_s, t0, side="left"))  # hits strictly before t0
+    lo = int(np.searchsorted(ta.times_s, t0 - cfg.link_max_gap_s, side="left"))
+    if hi <= lo:
+        return 0
+    if cfg.link_tail_ratio <= 0:
+        lo = hi - 1
+    gap = t0 - ta.times_s[lo:hi]
+    jump = np.linalg.norm(ta.positions[lo:hi] - p0, axis=1)
+    ok = np.flatnonzero(jump <= cfg.link_speed * gap + 1.0)
+    if not len(ok):
+        return 0
+    cut = lo + int(ok[-1]) + 1
+    n = ta.record.n_points
+    if cut < hi and np.mean(n[cut:hi]) > cfg.link_tail_ratio * np.mean(n[:cut]):
+        return 0
+    return cut
+
+
 def select_chain(
     tracks: list[ScoredTrack], cfg: TrackingConfig
 ) -> list[tuple[ScoredTrack, int, int]]:
@@ -316,14 +345,8 @@ def select_chain(
         for a in range(b):
             if starts[a] >= t0 or ends[a] < t0 - cfg.link_max_gap_s:
                 continue
-            ta = trs[a]
-            cut = int(np.searchsorted(ta.times_s, t0, side="left"))  # hits strictly before t0
+            cut = _link_cut(trs[a], t0, p0, cfg)
             if cut == 0:
-                continue
-            gap = t0 - ta.times_s[cut - 1]
-            if gap > cfg.link_max_gap_s:
-                continue
-            if np.linalg.norm(p0 - ta.positions[cut - 1]) > cfg.link_speed * gap + 1.0:
                 continue
             value = best_in[a] + cum[a][cut] - _LINK_COST
             if value > best_in[b]:

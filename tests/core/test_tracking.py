@@ -196,3 +196,51 @@ def test_crowding_counts_neighbours_about_as_substantial_within_the_radius() -> 
     np.testing.assert_array_equal(crowding(centroid, n_points, 3.0), [1, 1, 1, 1, 0])
     np.testing.assert_array_equal(crowding(centroid, n_points, 0.0), [0, 0, 0, 0, 0])
     assert len(crowding(np.zeros((0, 3)), np.zeros(0, dtype=np.int64), 3.0)) == 0
+
+
+def _scored(track_id: int, times: np.ndarray, positions: np.ndarray, points: np.ndarray):  # type: ignore[no-untyped-def]
+    """A scored track whose detections each weigh 1."""
+    from cldet.core.selection import ScoredTrack
+    from cldet.core.tracking import TrackRecord
+
+    h = len(times)
+    rec = TrackRecord(
+        track_id,
+        np.arange(h),
+        np.zeros(h, dtype=np.int64),
+        positions,
+        points.astype(np.int64),
+        np.ones(h),
+        np.zeros(h),
+    )
+    return ScoredTrack(rec, times, positions, np.ones(h), float(h))
+
+
+def _lost_then_found(tail_points: int):  # type: ignore[no-untyped-def]
+    """Track 1 follows the drone (20 returns a detection) for 4 s, then coasts 2 s on
+    detections of ``tail_points`` returns that lead away at 8.5 m/s; track 2 is the drone again,
+    8 m from where it was last seen, farther than any speed from track 1's end."""
+    t_a = np.arange(60) * 0.1
+    drone = np.column_stack([10 + 2.0 * t_a[:40], np.zeros(40), np.full(40, 5.0)])
+    stray = drone[-1] + np.outer(np.arange(1, 21) * 0.1, [-6.0, 6.0, 0.0])
+    a = _scored(1, t_a, np.vstack([drone, stray]), np.r_[np.full(40, 20), np.full(20, tail_points)])
+    t_b = 6.0 + np.arange(30) * 0.1
+    b_pos = drone[-1] + np.array([8.0, 0.0, 0.0]) + np.outer(t_b - 6.0, [2.0, 0.0, 0.0])
+    return a, _scored(2, t_b, b_pos, np.full(30, 20))
+
+
+def test_a_link_drops_a_tail_of_single_returns_that_strayed_but_not_a_steady_track() -> None:
+    cfg = TrackingConfig()
+    a, b = _lost_then_found(tail_points=1)
+    assert np.linalg.norm(b.positions[0] - a.positions[-1]) > cfg.link_speed * 0.1 + 1.0
+    chain = [(tr.record.track_id, i0, i1) for tr, i0, i1 in select_chain([a, b], cfg)]
+    assert len(chain) == 2 and chain[1] == (2, 0, 30)
+    _, i0, i1 = chain[0]
+    assert 40 <= i1 < 60  # the drone's part kept, the tail's end (out of reach) dropped
+    # the same track with a steady tail (as many returns as before) is not cut
+    a, b = _lost_then_found(tail_points=20)
+    assert [tr.record.track_id for tr, _, _ in select_chain([a, b], cfg)] == [1]
+    # the switch off: links leave at the next track's start only
+    a, b = _lost_then_found(tail_points=1)
+    off = TrackingConfig(link_tail_ratio=0.0)
+    assert [tr.record.track_id for tr, _, _ in select_chain([a, b], off)] == [1]
