@@ -52,8 +52,12 @@ class PriorScorer:
         drone."""
         if len(features) == 0:
             return np.zeros(0)
-        columns = [FEATURE_NAMES.index(n) for n in self.feature_names]
-        return self.trees.predict_proba(features[:, columns])[:, 1]
+        return self.trees.predict_proba(features[:, self._columns])[:, 1]
+
+    @functools.cached_property
+    def _columns(self) -> list[int]:
+        """Where its features stand in this code's feature vector."""
+        return [FEATURE_NAMES.index(n) for n in self.feature_names]
 
 
 def prior_json(
