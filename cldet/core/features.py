@@ -81,10 +81,10 @@ TYPE_FEATURES: Final[tuple[str, ...]] = (
 """The features the drone-type classifier reads: what the airframe's size changes (the area
 that returned the points, seen from which side; the box the points span, corrected for how
 many points spanned it, and its shape: a Mavic 3 is flat, 0.11 m tall for 0.35 m long, a
-Phantom 4 of the same footprint is 0.19 m tall), and what its surface's reflectivity changes (the two LiDARs' detection ranges
-differ, about 40 m against 190 m on a dark target, so the Mid-360's share of the returns falls
-with range sooner on a dark airframe than on a white one); not how it moves, which says more
-about the flight than about the airframe."""
+Phantom 4 of the same footprint is 0.19 m tall), and what its surface's reflectivity changes
+(the two LiDARs' detection ranges differ, about 40 m against 190 m on a dark target, so the
+Mid-360's share of the returns falls with range sooner on a dark airframe than on a white
+one); not how it moves, which says more about the flight than about the airframe."""
 TYPE_COLUMNS: Final = tuple(FEATURE_NAMES.index(n) for n in TYPE_FEATURES)
 
 _NIS95 = 7.81
