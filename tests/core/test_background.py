@@ -299,8 +299,8 @@ def test_a_facade_at_the_zenith_of_a_tilted_sensor_is_background_and_a_drone_the
     # evenly over its cone, sees the facade at a grazing angle right at its zenith (27 m out,
     # about 1.7 m of range per degree). Near the zenith a 2-degree azimuth column is a sliver
     # hit now and then; without grouping the columns there into cells at least a quarter of a
-    # cell wide, the facade's nearer returns scatter as foreground in every frame (a "track" straight
-    # above the sensor that outlasts every drone)
+    # cell wide, the facade's nearer returns scatter as foreground in every frame (a "track"
+    # straight above the sensor that outlasts every drone)
     facade = ((7.0, -40.0, -2.0), (8.0, 40.0, 100.0))
     t = np.radians(15.0)
     to_sensor = np.array(

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from cldet.config import TrackingConfig
-from cldet.core.selection import score_tracks, select_chain
-from cldet.core.tracking import CandidateTracker, ClusterTable, crowding
+from cldet.core.selection import ScoredTrack, score_tracks, select_chain
+from cldet.core.tracking import CandidateTracker, ClusterTable, TrackRecord, crowding
 
 GROUND = -1.5
 
@@ -198,11 +198,10 @@ def test_crowding_counts_neighbours_about_as_substantial_within_the_radius() -> 
     assert len(crowding(np.zeros((0, 3)), np.zeros(0, dtype=np.int64), 3.0)) == 0
 
 
-def _scored(track_id: int, times: np.ndarray, positions: np.ndarray, points: np.ndarray):  # type: ignore[no-untyped-def]
+def _scored(
+    track_id: int, times: np.ndarray, positions: np.ndarray, points: np.ndarray
+) -> ScoredTrack:
     """A scored track whose detections each weigh 1."""
-    from cldet.core.selection import ScoredTrack
-    from cldet.core.tracking import TrackRecord
-
     h = len(times)
     rec = TrackRecord(
         track_id,
@@ -216,7 +215,7 @@ def _scored(track_id: int, times: np.ndarray, positions: np.ndarray, points: np.
     return ScoredTrack(rec, times, positions, np.ones(h), float(h))
 
 
-def _lost_then_found(tail_points: int):  # type: ignore[no-untyped-def]
+def _lost_then_found(tail_points: int) -> tuple[ScoredTrack, ScoredTrack]:
     """Track 1 follows the drone (20 returns a detection) for 4 s, then coasts 2 s on
     detections of ``tail_points`` returns that lead away at 8.5 m/s; track 2 is the drone again,
     8 m from where it was last seen, farther than any speed from track 1's end."""
