@@ -66,10 +66,12 @@ class FramesConfig(BaseModel):
 
 
 class SensorConfig(BaseModel):
-    """Where the Mid-360 stands: the z-up ``world`` frame of a log's transform tree (viewing only).
+    """Where the Mid-360 stands: the z-up ``world`` frame of a log's transform tree.
 
     ``world`` is level (z up) with its origin on the ground right below the sensor and its x axis
     under the sensor's heading; estimates stay in the Mid-360's frame, this only places them.
+    With ``ground_from_pose`` the estimator also takes its ground plane from these figures
+    instead of fitting it to the data.
     """
 
     model_config = _STRICT
@@ -86,6 +88,13 @@ class SensorConfig(BaseModel):
     )
     pitch_deg: float = Field(
         default=0.0, ge=-90, le=90, description="the sensor's tilt about its y axis (degrees)"
+    )
+    ground_from_pose: bool = Field(
+        default=False,
+        description="the ground plane is the one height_m, roll_deg and pitch_deg describe, not"
+        " fitted to the static returns: for a mount whose own ground the sensor does not see"
+        " (a roof below the view of a sensor on it, where the fit finds the street far below);"
+        " false: fitted (the robustness benchmark's setting: the pose is not told)",
     )
 
 

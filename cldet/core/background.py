@@ -79,7 +79,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from cldet.config import BackgroundConfig
-from cldet.core.ground import GroundModel
+from cldet.core.ground import GroundModel, GroundPlane
 
 __all__ = ["CORE", "FOREGROUND", "MARGIN", "BackgroundModel", "StaticView", "direction_cells"]
 
@@ -491,9 +491,15 @@ class BackgroundModel:
     always judged by the past; until the first bin ends (``warm``) nothing is foreground.
     """
 
-    def __init__(self, cfg: BackgroundConfig, field_bottom_deg: float = -90.0) -> None:
+    def __init__(
+        self,
+        cfg: BackgroundConfig,
+        field_bottom_deg: float = -90.0,
+        ground_plane: GroundPlane | None = None,
+    ) -> None:
         """``field_bottom_deg``: the lowest elevation any sensor sees (in the sensor's frame);
-        never-hit cells below it are outside the field of view, not free space."""
+        never-hit cells below it are outside the field of view, not free space.
+        ``ground_plane``: the ground plane when known (never fitted then)."""
         self.cfg = cfg
         self._field_bottom_deg = field_bottom_deg
         self._n_az = int(round(360.0 / cfg.cell_deg))
@@ -513,7 +519,7 @@ class BackgroundModel:
         self._around = self._static  # the nearest static range in each cell and its 8
         self._slack = np.zeros(n_cells, dtype=np.float32)  # extra margin (grazing surfaces)
         self.floating_cells = 0  # cells released as floating blobs at the last refresh
-        self.ground = GroundModel(field_bottom_deg=field_bottom_deg)
+        self.ground = GroundModel(field_bottom_deg=field_bottom_deg, plane=ground_plane)
         self.n_frames = 0
         self._last_points = np.zeros((0, 3), dtype=np.float32)  # the last frame counted
 

@@ -82,6 +82,7 @@ from cldet.core.bias import apply_bias
 from cldet.core.clustering import cluster_points, summarize_clusters
 from cldet.core.features import FEATURE_NAMES, track_detections, track_features
 from cldet.core.frames import valid_points
+from cldet.core.ground import GroundModel
 from cldet.core.lines import find_lines
 from cldet.core.model import LearnedModel
 from cldet.core.prior import load_prior
@@ -304,8 +305,13 @@ class TrackEstimator:
         self.config = config
         self.model = model  # learned scorer and type classifier (None: the hand-set defaults)
         self._candidates: Candidates | None = None
+        sensor = config.sensor
         self.background = BackgroundModel(
-            config.background, field_bottom_deg=config.tracking.fov_bottom_deg
+            config.background,
+            field_bottom_deg=config.tracking.fov_bottom_deg,
+            ground_plane=GroundModel.from_pose(sensor.height_m, sensor.roll_deg, sensor.pitch_deg)
+            if sensor.ground_from_pose
+            else None,
         )
         self._tracker = CandidateTracker(config.tracking)
         self._stamps: list[int] = []

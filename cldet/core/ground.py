@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-__all__ = ["GroundModel"]
+__all__ = ["GroundModel", "GroundPlane"]
 
 _INLIER_M = 0.15  # a point this close to a candidate plane supports it
 _MIN_CLEARANCE_M = 0.2  # the ground passes at least this far below the sensor
@@ -41,13 +41,24 @@ _ITERATIONS = 64
 _MAX_POINTS = 4000  # RANSAC subsample
 
 
+GroundPlane = tuple[NDArray[np.float64], float]
+"""A ground plane: the unit "up" in the sensor's frame (3,), and the sensor's height above it."""
+
+
 class GroundModel:
     """Ground plane and height map, refitted from static points; ``height_above`` queries it."""
 
     def __init__(
-        self, max_tilt_deg: float = 35.0, seed: int = 0, field_bottom_deg: float = -90.0
+        self,
+        max_tilt_deg: float = 35.0,
+        seed: int = 0,
+        field_bottom_deg: float = -90.0,
+        plane: GroundPlane | None = None,
     ) -> None:
-        """``field_bottom_deg``: the lowest elevation the sensors see, in their own frame."""
+        """``field_bottom_deg``: the lowest elevation the sensors see, in their own frame.
+        ``plane``: the ground plane when it is known (the unit "up" in the sensor's frame and
+        the sensor's height above the plane, from the mount: ``from_pose``); it is then never
+        fitted, and ``fit`` only builds the height map."""
         self.max_tilt_deg = max_tilt_deg
         self.field_bottom_deg = field_bottom_deg
         self._rng = np.random.default_rng(seed)
@@ -57,6 +68,19 @@ class GroundModel:
         self._n = n
         self._map = np.full((n, n), np.inf)
         self._axes = np.eye(3)[:2]  # (2,3) in-plane axes for the map
+        self._known = plane is not None
+        if plane is not None:
+            self._place(np.asarray(plane[0], dtype=np.float64), float(plane[1]))
+
+    @staticmethod
+    def from_pose(height_m: float, roll_deg: float, pitch_deg: float) -> GroundPlane:
+        """The ground plane of a sensor ``height_m`` above level ground, tilted by ``roll_deg``
+        about its x axis, then ``pitch_deg`` about its y axis (``cldet.io.transforms``'s
+        ``world_from_mid360``): the world's "up" in the sensor's frame, and the height."""
+        from scipy.spatial.transform import Rotation
+
+        tilt = Rotation.from_euler("xy", [roll_deg, pitch_deg], degrees=True).as_matrix()
+        return tilt[2].copy(), float(height_m)
 
     @property
     def fitted(self) -> bool:
@@ -66,12 +90,24 @@ class GroundModel:
     def fit(self, points: NDArray[np.floating]) -> bool:
         """Refit plane and height map from static points (N,3), metres, sensor frame.
 
-        Returns whether a plane was found; the previous fit is kept otherwise.
+        Returns whether a plane was found; the previous fit is kept otherwise. A known plane
+        (``plane``) is kept: only the height map is built, and this returns True.
         """
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         p = p[np.all(np.isfinite(p), axis=1)]
-        if len(p) < 3:
-            return False
+        if not self._known:
+            if len(p) < 3:
+                return False
+            plane = self._search(p)
+            if plane is None:
+                return False
+            self._place(*plane)
+        self._build_map(p)
+        return True
+
+    def _search(self, p: NDArray[np.float64]) -> GroundPlane | None:
+        """The plane with the most inliers among the static points ``p`` (see the module
+        docstring), or None."""
         sample = p if len(p) <= _MAX_POINTS else p[self._rng.choice(len(p), _MAX_POINTS, False)]
         cos_max = np.cos(np.radians(self.max_tilt_deg))
         # candidate planes from random triples, evaluated together
@@ -85,13 +121,13 @@ class GroundModel:
         d = -np.einsum("ij,ij->i", n, a)  # plane: n.x + d = 0; sensor height above it = d
         ok &= (n[:, 2] >= cos_max) & (d >= _MIN_CLEARANCE_M)
         if not ok.any():
-            return False
+            return None
         n, d = n[ok], d[ok]
         dist = np.abs(sample @ n.T + d)  # (S, C)
         support = np.sum(dist < _INLIER_M, axis=0)
         best = int(np.argmax(support))
         if support[best] < 3:
-            return False
+            return None
         # refine by least squares on the inliers
         inl = sample[dist[:, best] < _INLIER_M]
         centre = inl.mean(axis=0)
@@ -100,6 +136,10 @@ class GroundModel:
         offset = -float(normal @ centre)
         if normal[2] < cos_max or offset < _MIN_CLEARANCE_M:
             normal, offset = n[best], float(d[best])
+        return normal, offset
+
+    def _place(self, normal: NDArray[np.float64], offset: float) -> None:
+        """Take ``normal``, ``offset`` as the plane, with in-plane axes for the height map."""
         self.normal = normal
         self.offset = offset
         ax = np.cross(normal, [0.0, 1.0, 0.0])
@@ -107,14 +147,17 @@ class GroundModel:
             ax = np.cross(normal, [1.0, 0.0, 0.0])
         ax /= np.linalg.norm(ax)
         self._axes = np.stack([ax, np.cross(normal, ax)])
-        height = p @ normal + offset
+
+    def _build_map(self, p: NDArray[np.float64]) -> None:
+        """The height map from the static points ``p`` over the current plane."""
+        assert self.normal is not None
+        height = p @ self.normal + self.offset
         i, j, inside = self._cells(p)
         grid = np.full(self._n * self._n, np.inf)
         np.minimum.at(grid, i[inside] * self._n + j[inside], height[inside])
         grid[~self._ground_in_view()] = np.inf
         # the local ground of a cell: the lowest height within one cell of it
         self._map = ndimage.minimum_filter(grid.reshape(self._n, self._n), size=3, mode="nearest")
-        return True
 
     def _cells(
         self, p: NDArray[np.float64]

@@ -910,3 +910,14 @@ def test_a_missed_frame_of_a_straight_pass_follows_the_runs_line(seed: int) -> N
 
     assert worst_missed(True) < 0.5
     assert worst_missed(False) > 2 * worst_missed(True)  # the rule is needed here
+
+
+def test_a_known_mount_is_the_estimators_ground_from_the_start() -> None:
+    # sensor.ground_from_pose: the ground plane is the configured mount's, never fitted
+    known = TrackEstimator(
+        load_config(overrides={"sensor": {"ground_from_pose": True, "height_m": 2.4}})
+    )
+    ground = known.background.ground
+    assert ground.fitted and ground.offset == 2.4
+    np.testing.assert_allclose(ground.normal, [0.0, 0.0, 1.0])
+    assert not TrackEstimator(load_config()).background.ground.fitted  # fitted to the data

@@ -90,3 +90,45 @@ def test_where_the_ground_is_below_the_field_of_view_the_plane_is_the_ground() -
     lot = np.stack([rng.uniform(60, 70, 400), rng.uniform(-5, 5, 400), np.full(400, -7.0)], 1)
     assert blind.fit(np.concatenate([ground, lot]))
     assert blind.height_above(np.array([[65.0, 0.0, -6.0]]))[0] == pytest.approx(1.0, abs=0.1)
+
+
+def test_a_known_mount_gives_the_plane_the_fit_finds() -> None:
+    # level ground seen by a sensor 3 m up, rolled 10 deg and pitched -5 deg: the plane from the
+    # mount (as the log's transform tree places the sensor) is the one fitted to the returns
+    from cldet.config import SensorConfig
+    from cldet.io.transforms import world_from_mid360
+
+    rng = np.random.default_rng(10)
+    sensor = SensorConfig(height_m=3.0, roll_deg=10.0, pitch_deg=-5.0)
+    world = np.column_stack([rng.uniform(-30, 30, (3000, 2)), np.zeros(3000)])
+    pose = world_from_mid360(sensor)
+    seen = (world - pose[:3, 3]) @ pose[:3, :3]  # into the sensor's frame
+    fitted = GroundModel()
+    assert fitted.fit(seen)
+    assert fitted.normal is not None
+    known = GroundModel(plane=GroundModel.from_pose(3.0, 10.0, -5.0))
+    assert known.fitted  # before any return is seen
+    assert known.normal is not None
+    assert np.degrees(np.arccos(np.clip(known.normal @ fitted.normal, -1, 1))) < 0.5
+    assert known.offset == pytest.approx(fitted.offset, abs=0.05)
+    np.testing.assert_allclose(known.plane_height(seen), 0.0, atol=1e-9)
+
+
+def test_on_a_roof_below_the_view_a_known_mount_keeps_the_roof_as_the_ground() -> None:
+    # a sensor 2.4 m above a roof 30 m wide, which lies below its view (the Mid-360 sees the
+    # roof only beyond ~19 m); the street 12 m lower is seen from 20 m out, beyond the edge
+    rng = np.random.default_rng(11)
+    r = rng.uniform(20.0, 80.0, 3000)
+    az = rng.uniform(-np.pi, np.pi, 3000)
+    street = np.column_stack([r * np.cos(az), r * np.sin(az), np.full(3000, -14.4)])
+    head = np.array([[8.0, 0.0, -0.6]])  # a person on the roof: head 1.8 m above it
+    fitted = GroundModel(field_bottom_deg=-7.3)
+    assert fitted.fit(street)
+    assert fitted.offset == pytest.approx(14.4, abs=0.1)  # the street is all it sees
+    assert fitted.height_above(head)[0] == pytest.approx(13.8, abs=0.1)  # "flying"
+    known = GroundModel(field_bottom_deg=-7.3, plane=GroundModel.from_pose(2.4, 0.0, 0.0))
+    assert known.fit(street)
+    assert known.offset == 2.4
+    assert known.height_above(head)[0] == pytest.approx(1.8, abs=0.05)
+    # and beyond the edge the street seen there is the local ground
+    assert known.height_above(np.array([[40.0, 0.0, -10.0]]))[0] == pytest.approx(4.4, abs=0.1)
