@@ -7,7 +7,10 @@ sensor, on a slope, on a rooftop. So nothing assumes a level sensor or one groun
    pass below the sensor (at least ``_MIN_CLEARANCE_M`` under the origin) and whose normal is
    within ``max_tilt_deg`` of the sensor's +z axis (a sensor tilted up to 20 deg on ground
    sloped up to 10 deg). Its normal, pointing away from the ground towards the sensor, is "up".
-   On a rooftop the roof is the plane; on a hillside, the slope.
+   On a rooftop the roof is the plane; on a hillside, the slope. Where the sensor's own ground
+   lies below its view (a roof under a sensor on it) the fit can only find what it sees (the
+   street far below): a known mount (``plane``, ``from_pose``; ``sensor.ground_from_pose``)
+   is then taken as the plane and never fitted.
 2. **Height map.** Every static point's height above that plane goes into a horizontal grid of
    ``_CELL_M`` (2 m) cells in the plane's own coordinates; a cell keeps its lowest height. The
    local ground under a query point is the lowest cell within one cell of it (walls and roofs
