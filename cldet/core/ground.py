@@ -33,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
+from scipy.spatial.transform import Rotation
 
 __all__ = ["GroundModel", "GroundPlane"]
 
@@ -80,8 +81,6 @@ class GroundModel:
         """The ground plane of a sensor ``height_m`` above level ground, tilted by ``roll_deg``
         about its x axis, then ``pitch_deg`` about its y axis (``cldet.io.transforms``'s
         ``world_from_mid360``): the world's "up" in the sensor's frame, and the height."""
-        from scipy.spatial.transform import Rotation
-
         tilt = Rotation.from_euler("xy", [roll_deg, pitch_deg], degrees=True).as_matrix()
         return tilt[2].copy(), float(height_m)
 
