@@ -328,7 +328,8 @@ def cluster_points(
 def summarize_clusters(
     points: NDArray[np.floating], labels: NDArray[np.integer], n_mid360: int | None = None
 ) -> tuple[Cluster, ...]:
-    """One Cluster per label 0..K-1 (noise ignored): centroid, box, point counts per sensor.
+    """One Cluster per label 0..K-1 (noise ignored): centroid, box, point counts per sensor,
+    the Mid-360 points' vertical spread.
 
     Args:
         points: (N,3) metres.
@@ -353,6 +354,11 @@ def summarize_clusters(
     lower = np.minimum.reduceat(p_s, starts, axis=0)
     upper = np.maximum.reduceat(p_s, starts, axis=0)
     cent = np.add.reduceat(p_s, starts, axis=0) / sizes[:, None]
+    # the Mid-360 points' vertical spread about their own mean, per cluster
+    z_mid = np.where(is_mid, p[:, 2], 0.0)
+    mean_mid = np.bincount(lab, weights=z_mid, minlength=k) / np.maximum(n_mid_c, 1)
+    dev = np.where(is_mid, p[:, 2] - mean_mid[lab], 0.0)
+    z_ss = np.bincount(lab, weights=dev * dev, minlength=k)
     return tuple(
         Cluster(
             cluster_id=c,
@@ -362,6 +368,7 @@ def summarize_clusters(
             n_points=int(sizes[c]),
             n_mid360=int(n_mid_c[c]),
             n_avia=int(sizes[c] - n_mid_c[c]),
+            mid360_z_ss=float(z_ss[c]),
         )
         for c in range(k)
     )

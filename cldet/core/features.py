@@ -66,6 +66,12 @@ FEATURE_NAMES: Final[tuple[str, ...]] = (
     "size_z_est_m",  # median vertical edge so scaled
     "size_xy_est_m",  # median larger horizontal edge so scaled
     "aspect_med",  # median vertical / larger horizontal edge (the scaling cancels): flat or tall
+    # the Mid-360 points' standard deviation in z about each detection's own mean, pooled over
+    # the detections with 2 Mid-360 points or more (unbiased whatever their count): the
+    # airframe's height seen from the side. The Mid-360 sweeps a small target once a frame; the
+    # Avia's rosette comes back to it through the 100 ms scan, so its points also spread with
+    # the drone's motion
+    "mid_sd_z_m",
 )
 
 TYPE_FEATURES: Final[tuple[str, ...]] = (
@@ -77,6 +83,7 @@ TYPE_FEATURES: Final[tuple[str, ...]] = (
     "aspect_med",
     "log_range_med",
     "log_mid_avia_med",
+    "mid_sd_z_m",
 )
 """The features the drone-type classifier reads: what the airframe's size changes (the area
 that returned the points, seen from which side; the box the points span, corrected for how
@@ -102,6 +109,7 @@ class TrackDetections:
     n_avia: NDArray[np.int64]  # (H,)
     cross: F64  # (H,) cross-section, m^2
     crowd: NDArray[np.int64]  # (H,) other clusters near the detection's (0 for raw-gate ones)
+    mid_z_ss: F64  # (H,) Mid-360 points' summed squared z deviations, m^2 (0 for raw-gate ones)
 
     @property
     def both(self) -> NDArray[np.bool_]:
@@ -120,6 +128,7 @@ def track_detections(
     n_mid = rec.n_points.copy()
     n_avia = np.zeros(h, dtype=np.int64)
     crowd = np.zeros(h, dtype=np.int64)
+    mid_z_ss = np.zeros(h)
     for k in np.flatnonzero(~rec.raw):
         table, c = tables[rec.frames[k]], rec.clusters[k]
         extent[k] = table.extent[c]
@@ -127,8 +136,9 @@ def track_detections(
         height[k] = table.heights()[c]
         n_mid[k], n_avia[k] = table.n_mid360[c], table.n_avia[c]
         crowd[k] = table.crowds()[c]
+        mid_z_ss[k] = table.mid360_z_spreads()[c]
     cross = cross_section(n_mid, n_avia, rec.positions, cfg)
-    return TrackDetections(extent, size, height, n_mid, n_avia, cross, crowd)
+    return TrackDetections(extent, size, height, n_mid, n_avia, cross, crowd, mid_z_ss)
 
 
 def _nanmedian(x: F64) -> float:
@@ -219,9 +229,19 @@ def track_features(
             z_est,
             xy_est,
             aspect,
+            _pooled_sd(det.mid_z_ss[:n], n_mid, cl),
         ],
         dtype=np.float64,
     )
+
+
+def _pooled_sd(ss: F64, counts: NDArray[np.int64], cl: NDArray[np.bool_]) -> float:
+    """sqrt(sum of squared deviations / degrees of freedom) over the detections of clusters
+    (``cl``) with 2 points or more (``counts``): the spread within one detection, whatever
+    the detections' point counts (NaN: no such detection)."""
+    ok = cl & (counts >= 2)
+    dof = float(np.sum(counts[ok] - 1))
+    return float(np.sqrt(np.sum(ss[ok]) / dof)) if dof > 0 else float("nan")
 
 
 def _box_estimates(

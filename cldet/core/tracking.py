@@ -67,6 +67,8 @@ class ClusterTable:
     crowd: NDArray[np.int64] | None = None  # (K,) other clusters within the crowd radius
     # (K,) a static surface at or in front of the cluster when it was seen (StaticView.screened)
     screened: NDArray[np.bool_] | None = None
+    # (K,) the Mid-360 points' summed squared deviations from their mean z, m^2 (Cluster)
+    mid360_z_ss: NDArray[np.float64] | None = None
 
     def crowds(self) -> NDArray[np.int64]:
         """(K,) how many other clusters of the frame lie near each one (0: not counted)."""
@@ -75,6 +77,10 @@ class ClusterTable:
     def sizes(self) -> NDArray[np.float64]:
         """(K,3) each cluster's box edges (x, y, z), metres (NaN: unknown)."""
         return np.full((len(self), 3), np.nan) if self.size is None else self.size
+
+    def mid360_z_spreads(self) -> NDArray[np.float64]:
+        """(K,) each cluster's Mid-360 points' summed squared deviations from their mean z, m^2."""
+        return np.zeros(len(self)) if self.mid360_z_ss is None else self.mid360_z_ss
 
     def heights(self) -> NDArray[np.float64]:
         """(K,) each cluster's height above the local ground, metres (NaN: unknown)."""
@@ -95,6 +101,7 @@ class ClusterTable:
             n_mid360=np.array([c.n_mid360 for c in clusters], dtype=np.int64),
             n_avia=np.array([c.n_avia for c in clusters], dtype=np.int64),
             size=size,
+            mid360_z_ss=np.array([c.mid360_z_ss for c in clusters], dtype=np.float64),
         )
 
     def __len__(self) -> int:

@@ -134,5 +134,8 @@ def test_summarize_clusters() -> None:
     np.testing.assert_allclose(big.centroid, [0, 1 / 3, 1 / 3])
     np.testing.assert_allclose(big.lower, [0, 0, 0])
     np.testing.assert_allclose(big.upper, [0, 1, 1])
+    # the vertical spread counts the Mid-360's points only (z 0 and 1 about 0.5), not the Avia's
+    assert big.mid360_z_ss == pytest.approx(0.5)
+    assert [c.mid360_z_ss for c in clusters[1:]] == [0.0, 0.0]
     assert sum(c.n_points for c in clusters) == 5
     assert summarize_clusters(np.zeros((0, 3)), np.zeros(0, dtype=np.int32)) == ()

@@ -3,19 +3,24 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from cldet.core.features import FEATURE_NAMES, TrackDetections, track_features
 from cldet.core.tracking import TrackRecord
 
 
-def _track(size_m: tuple[float, float, float], points: int, seed: int) -> np.ndarray:
-    """The features of a 60-detection hover whose clusters hold ``points`` points drawn
-    evenly inside a box of ``size_m`` (x, y, z edges)."""
+def _track(
+    size_m: tuple[float, float, float], points: int, seed: int, sensor: str = "avia"
+) -> np.ndarray:
+    """The features of a 60-detection hover whose clusters hold ``points`` points of one
+    ``sensor`` ("avia" or "mid360") drawn evenly inside a box of ``size_m`` (x, y, z edges)."""
     rng = np.random.default_rng(seed)
     h = 60
-    edges = np.array(
-        [np.ptp(rng.uniform(0.0, 1.0, (points, 3)) * size_m, axis=0) for _ in range(h)]
-    )
+    clouds = rng.uniform(0.0, 1.0, (h, points, 3)) * size_m
+    edges = np.ptp(clouds, axis=1)
+    z_ss = np.sum((clouds[:, :, 2] - clouds[:, :, 2].mean(axis=1, keepdims=True)) ** 2, axis=1)
+    counts = np.full(h, points)
+    none = np.zeros(h, dtype=np.int64)
     positions = np.tile([3.0, 4.0, 20.0], (h, 1))
     rec = TrackRecord(
         0,
@@ -30,10 +35,11 @@ def _track(size_m: tuple[float, float, float], points: int, seed: int) -> np.nda
         extent=edges.max(axis=1),
         size=edges,
         height=np.full(h, 18.0),
-        n_mid360=np.zeros(h, dtype=np.int64),
-        n_avia=np.full(h, points),
+        n_mid360=counts if sensor == "mid360" else none,
+        n_avia=none if sensor == "mid360" else counts,
         cross=np.full(h, 0.1),
-        crowd=np.zeros(h, dtype=np.int64),
+        crowd=none,
+        mid_z_ss=z_ss if sensor == "mid360" else np.zeros(h),
     )
     return track_features(rec, det, np.arange(h) * 0.1)
 
@@ -59,3 +65,15 @@ def test_box_estimates_are_unknown_without_a_detection_of_two_points() -> None:
     features = _track((0.3, 0.3, 0.2), 1, 5)
     for name in ("size_z_est_m", "size_xy_est_m", "aspect_med"):
         assert np.isnan(_f(features, name))
+
+
+def test_the_mid360_height_spread_tells_flat_from_tall_at_any_point_count() -> None:
+    # points even over a height h spread by h / sqrt(12) about their mean, pooled over detections
+    # of 2, 3 or 8 points alike
+    for points in (2, 3, 8):
+        flat = _f(_track((0.35, 0.29, 0.11), points, 6, "mid360"), "mid_sd_z_m")
+        tall = _f(_track((0.30, 0.30, 0.19), points, 7, "mid360"), "mid_sd_z_m")
+        assert flat == pytest.approx(0.11 / np.sqrt(12), rel=0.2)
+        assert tall == pytest.approx(0.19 / np.sqrt(12), rel=0.2)
+    # the Avia's points do not count (its rosette smears a moving drone through the scan)
+    assert np.isnan(_f(_track((0.30, 0.30, 0.19), 8, 8), "mid_sd_z_m"))
