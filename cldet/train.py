@@ -24,7 +24,10 @@ estimator's per-frame verb with the configuration given and keeps its candidate 
 
 A leave-one-sequence-out cross-validation (every log held out once, models fitted on the others)
 reports the type accuracy per row and the confusion matrix, and the refined position error with
-the learned scorer against the default's, on the same candidates.
+the learned scorer against the default's, on the same candidates. It also decides whether the
+scorer is kept: only where the held-out logs were refined no worse with it than with the learned
+timing and bias alone (:func:`scorer_earns_its_place`); a scorer fitted on a few logs can learn
+their accidents, and without it the packaged prior still re-weighs the tracks.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from contextlib import closing
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Final
 
@@ -388,6 +391,8 @@ class FoldResult:
     mse_learned: float
     fails_default: bool  # RMS over 1 m
     fails_learned: bool
+    mse_unscored: float = float("nan")  # learned timing and bias without the learned scorer
+    fails_unscored: bool = False
 
 
 def _mse(sample: SequenceSample, estimates: Sequence[Estimate]) -> float:
@@ -417,8 +422,10 @@ def cross_validate(
         )
         default = refine_candidates(held.cand, config)
         learned = refine_candidates(held.cand, learned_cfg, model)
+        unscored = refine_candidates(held.cand, learned_cfg, replace(model, scorer=None))
         predicted = learned.classes[-1].class_id if learned.classes else None
         mse_d, mse_l = _mse(held, default.estimates), _mse(held, learned.estimates)
+        mse_u = _mse(held, unscored.estimates)
         out.append(
             FoldResult(
                 held.log,
@@ -429,10 +436,27 @@ def cross_validate(
                 mse_l,
                 bool(np.sqrt(3 * mse_d) > 1.0),
                 bool(np.sqrt(3 * mse_l) > 1.0),
+                mse_u,
+                bool(np.sqrt(3 * mse_u) > 1.0),
             )
         )
         progress.advance()
     return out
+
+
+def scorer_earns_its_place(folds: Sequence[FoldResult]) -> bool:
+    """Whether the learned drone-vs-clutter scorer improved the held-out logs' refinement: with
+    it, no more sequences off by over 1 m and no higher position MSE (rows weighted) than with
+    the learned timing and bias alone. A scorer fitted on a few logs can learn their accidents;
+    the packaged prior (``tracking.prior_scorer``) still weighs the tracks without it."""
+    if not folds:
+        return True  # no evidence either way: kept as trained
+    rows = np.array([f.rows for f in folds], dtype=np.float64)
+    with_mse = float(np.average([f.mse_learned for f in folds], weights=rows))
+    without_mse = float(np.average([f.mse_unscored for f in folds], weights=rows))
+    with_fails = sum(f.fails_learned for f in folds)
+    without_fails = sum(f.fails_unscored for f in folds)
+    return with_fails <= without_fails and with_mse <= without_mse
 
 
 # ---------------------------------------------------------------------------- command
@@ -461,11 +485,19 @@ class TrainReport:
             mse_l = float(np.average([f.mse_learned for f in self.folds], weights=rows))
             fd = sum(f.fails_default for f in self.folds)
             fl = sum(f.fails_learned for f in self.folds)
+            mse_u = float(np.average([f.mse_unscored for f in self.folds], weights=rows))
+            fu = sum(f.fails_unscored for f in self.folds)
             lines.append(
                 f"leave-one-sequence-out over {n} logs: position MSE per coordinate default"
-                f" {mse_d:.4f} m^2 -> learned {mse_l:.4f} m^2; sequences off by more than 1 m"
-                f" (RMS): default {fd}, learned {fl}"
+                f" {mse_d:.4f} m^2 -> learned {mse_l:.4f} m^2 (without the learned scorer"
+                f" {mse_u:.4f}); sequences off by more than 1 m (RMS): default {fd}, learned {fl}"
+                f" (without the scorer {fu})"
             )
+            if m.info.get("scorer") == "dropped":
+                lines.append(
+                    "the learned drone-vs-clutter scorer did not improve the held-out logs:"
+                    " not kept (the model keeps the timing, the bias and the type classifier)"
+                )
             typed = [f for f in self.folds if f.true_class is not None]
             true = [int(f.true_class) for f in typed if f.true_class is not None]
             # no chain, no type: counted wrong (and left out of the matrix)
@@ -587,5 +619,7 @@ def train_logs(
     )
     if cross_validation and len(samples) < 3:
         warn("cross-validation needs three logs or more: skipped")
+    if model.scorer is not None and not scorer_earns_its_place(folds):
+        model = replace(model, scorer=None, info={**model.info, "scorer": "dropped"})
     write_model(model, out, overwrite=overwrite)
     return TrainReport(model, folds, time.perf_counter() - started)

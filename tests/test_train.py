@@ -21,11 +21,13 @@ from cldet.io import topics
 from cldet.io.mcap_read import open_log
 from cldet.modelfile import ModelError, load_model, model_bytes, write_model
 from cldet.train import (
+    FoldResult,
     SequenceSample,
     TrainError,
     collect_sequence,
     fit_scan_offset,
     fit_typer,
+    scorer_earns_its_place,
     train_logs,
 )
 
@@ -63,7 +65,37 @@ def test_train_writes_a_model_that_loads_with_what_it_learned(trained: tuple[Pat
     assert model.class_ids == [0, 2]
     # the cross-validation report: every log held out once, the type's confusion matrix
     assert "leave-one-sequence-out over 4 logs" in text
+    assert "without the learned scorer" in text
     assert "per-row accuracy" in text and "true \\ predicted" in text
+
+
+def _fold(rows: int, with_scorer_m: float, without_m: float) -> FoldResult:
+    """A held-out log whose refinement missed by an RMS of ``with_scorer_m`` with the learned
+    scorer and ``without_m`` with the learned timing and bias alone."""
+    mse_l, mse_u = with_scorer_m**2 / 3, without_m**2 / 3
+    return FoldResult(
+        Path("a.mcap"),
+        None,
+        None,
+        rows,
+        mse_u,
+        mse_l,
+        without_m > 1,
+        with_scorer_m > 1,
+        mse_u,
+        without_m > 1,
+    )
+
+
+def test_the_scorer_is_kept_only_where_the_held_out_logs_were_no_worse_with_it() -> None:
+    good = [_fold(100, 0.2, 0.2), _fold(100, 0.3, 9.0)]  # it mended one log
+    assert scorer_earns_its_place(good)
+    broke_one = [_fold(100, 0.2, 0.2), _fold(100, 16.5, 0.3)]  # it broke one
+    assert not scorer_earns_its_place(broke_one)
+    # as many failures, but further off where it failed (rows weigh the error)
+    worse = [_fold(100, 0.2, 0.2), _fold(300, 20.0, 12.0)]
+    assert not scorer_earns_its_place(worse)
+    assert scorer_earns_its_place([])  # no cross-validation: no evidence, kept as trained
 
 
 def test_collect_labels_the_drone_track_against_the_truth(train_logs_: list[Path]) -> None:
