@@ -354,11 +354,12 @@ def summarize_clusters(
     lower = np.minimum.reduceat(p_s, starts, axis=0)
     upper = np.maximum.reduceat(p_s, starts, axis=0)
     cent = np.add.reduceat(p_s, starts, axis=0) / sizes[:, None]
-    # the Mid-360 points' vertical spread about their own mean, per cluster
-    z_mid = np.where(is_mid, p[:, 2], 0.0)
-    mean_mid = np.bincount(lab, weights=z_mid, minlength=k) / np.maximum(n_mid_c, 1)
-    dev = np.where(is_mid, p[:, 2] - mean_mid[lab], 0.0)
-    z_ss = np.bincount(lab, weights=dev * dev, minlength=k)
+    # the Mid-360 points' vertical spread about their own mean, per cluster (about the centroid
+    # first, so that the sums of squares lose nothing to the points' height)
+    z = np.where(is_mid[order], p_s[:, 2] - cent[lab_s, 2], 0.0)
+    sum_z = np.add.reduceat(z, starts)
+    z_ss = np.maximum(np.add.reduceat(z * z, starts) - sum_z**2 / np.maximum(n_mid_c, 1), 0.0)
+    z_ss_list = z_ss.tolist()
     return tuple(
         Cluster(
             cluster_id=c,
@@ -368,7 +369,7 @@ def summarize_clusters(
             n_points=int(sizes[c]),
             n_mid360=int(n_mid_c[c]),
             n_avia=int(sizes[c] - n_mid_c[c]),
-            mid360_z_ss=float(z_ss[c]),
+            mid360_z_ss=z_ss_list[c],
         )
         for c in range(k)
     )
