@@ -27,7 +27,8 @@ reports the type accuracy per row and the confusion matrix, and the refined posi
 the learned scorer against the default's, on the same candidates. It also decides whether the
 scorer is kept: only where the held-out logs were refined clearly better with it than with the
 learned timing and bias alone (:func:`scorer_earns_its_place`); a scorer fitted on a few logs can
-learn their accidents, and without it the packaged prior still re-weighs the tracks.
+learn their accidents, and without it the packaged prior (on by default) still re-weighs the
+tracks.
 """
 
 from __future__ import annotations
@@ -391,8 +392,9 @@ class FoldResult:
     mse_learned: float
     fails_default: bool  # RMS over 1 m
     fails_learned: bool
-    mse_unscored: float = float("nan")  # learned timing and bias without the learned scorer
-    fails_unscored: bool = False
+    mse_unscored: float  # the learned timing and bias without the learned scorer
+    fails_unscored: bool
+    predicted_unscored: int | None  # the type voted over the chain chosen without the scorer
 
 
 def _mse(sample: SequenceSample, estimates: Sequence[Estimate]) -> float:
@@ -407,9 +409,9 @@ def cross_validate(
 ) -> list[FoldResult]:
     """Leave one sequence out: fit on the others, refine and type the held-out one.
 
-    Both refinements use the held-out log's candidates with the scan offset of the pass that
-    made them; the learned one applies the learned centroid bias, the default one the
-    configuration's.
+    The three refinements (default; learned; learned without its scorer) use the held-out log's
+    candidates with the scan offset of the pass that made them; the learned ones apply the
+    learned centroid bias, the default one the configuration's.
     """
     progress = progress or NullProgress()
     progress.start(len(samples), "cross-validation")
@@ -424,6 +426,7 @@ def cross_validate(
         learned = refine_candidates(held.cand, learned_cfg, model)
         unscored = refine_candidates(held.cand, learned_cfg, replace(model, scorer=None))
         predicted = learned.classes[-1].class_id if learned.classes else None
+        predicted_u = unscored.classes[-1].class_id if unscored.classes else None
         mse_d, mse_l = _mse(held, default.estimates), _mse(held, learned.estimates)
         mse_u = _mse(held, unscored.estimates)
         out.append(
@@ -438,6 +441,7 @@ def cross_validate(
                 bool(np.sqrt(3 * mse_l) > 1.0),
                 mse_u,
                 bool(np.sqrt(3 * mse_u) > 1.0),
+                predicted_u,
             )
         )
         progress.advance()
@@ -455,7 +459,8 @@ def scorer_earns_its_place(folds: Sequence[FoldResult]) -> bool:
     many and a position MSE (rows weighted) at least :data:`SCORER_MIN_GAIN` lower. A scorer
     fitted on a few logs can learn their accidents, and a tie on a few dozen held-out logs is
     no evidence that it helps; without it the packaged prior (``tracking.prior_scorer``) still
-    weighs the tracks. No cross-validation (``folds`` empty): kept as trained."""
+    weighs the tracks (with ``tracking.prior_scorer`` on, the default). No cross-validation
+    (``folds`` empty): kept as trained. A fold whose MSE is not finite counts against it."""
     if not folds:
         return True
     rows = np.array([f.rows for f in folds], dtype=np.float64)
@@ -511,7 +516,10 @@ class TrainReport:
             typed = [f for f in self.folds if f.true_class is not None]
             true = [int(f.true_class) for f in typed if f.true_class is not None]
             # no chain, no type: counted wrong (and left out of the matrix)
-            pred = [-1 if f.predicted_class is None else f.predicted_class for f in typed]
+            # the type of the chain the written model picks: with or without its scorer
+            dropped = m.info.get("scorer") == "dropped"
+            voted = [f.predicted_unscored if dropped else f.predicted_class for f in typed]
+            pred = [-1 if v is None else v for v in voted]
             if typed and m.class_ids:
                 w = np.array([f.rows for f in typed], dtype=np.float64)
                 ok = np.array([t == p for t, p in zip(true, pred, strict=True)], dtype=np.float64)

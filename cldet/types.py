@@ -74,8 +74,9 @@ class Cluster:
     n_mid360: int = 0  # of which from the Mid-360
     n_avia: int = 0  # of which from the Avia
     # the Mid-360 points' squared deviations from their mean height (sensor z), summed, m^2: with
-    # n_mid360 their vertical spread (a drone type's height), free of the Avia's motion smear
-    mid360_z_ss: float = 0.0
+    # n_mid360 their vertical spread (a drone type's height), free of the Avia's motion smear;
+    # NaN: not measured
+    mid360_z_ss: float = float("nan")
 
 
 @dataclass(frozen=True)

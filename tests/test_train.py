@@ -86,6 +86,7 @@ def _fold(rows: int, with_scorer_m: float, without_m: float) -> FoldResult:
         with_scorer_m > 1,
         mse_u,
         without_m > 1,
+        None,
     )
 
 
@@ -329,10 +330,11 @@ def test_existing_output_refused_before_any_work(train_logs_: list[Path], tmp_pa
 def test_training_in_parallel_learns_the_same_model(
     train_logs_: list[Path], trained: tuple[Path, str], tmp_path: Path
 ) -> None:
-    """The logs' passes in two worker processes: the same samples, so the same model."""
+    """The logs' passes in two worker processes: the same samples, so the same model (without
+    a cross-validation the scorer is kept as trained, and read back from the file)."""
     out = tmp_path / "parallel.zip"
     report = train_logs(train_logs_, out, workers=2, cross_validation=False)
-    alone = load_model(trained[0])
+    alone = train_logs(train_logs_, tmp_path / "alone.zip", cross_validation=False).model
     together = load_model(out)
     assert report.model.scan_offset_s == alone.scan_offset_s == together.scan_offset_s
     assert (together.bias_along_ray_m, together.bias_z_m) == (
@@ -340,11 +342,18 @@ def test_training_in_parallel_learns_the_same_model(
         alone.bias_z_m,
     )
     assert together.class_ids == alone.class_ids
-    assert together.scorer is not None  # without a cross-validation it is kept as trained
+    assert together.scorer is not None and alone.scorer is not None
     rng = np.random.default_rng(1)
     feats = rng.normal(0.0, 1.0, (20, len(FEATURE_NAMES)))
+    np.testing.assert_array_equal(together.drone_probability(feats), alone.drone_probability(feats))
     groups = np.arange(20) % 2
     np.testing.assert_array_equal(
         together.type_probabilities(feats, np.ones(20), groups),
+        alone.type_probabilities(feats, np.ones(20), groups),
+    )
+    # the cross-validated model of the same logs: the same type classifier, whatever it decided
+    # for the scorer
+    np.testing.assert_array_equal(
+        load_model(trained[0]).type_probabilities(feats, np.ones(20), groups),
         alone.type_probabilities(feats, np.ones(20), groups),
     )

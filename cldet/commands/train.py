@@ -77,7 +77,8 @@ def train(
     It prints a leave-one-sequence-out cross-validation: position error with the learned scorer
     against the default and against the learned timing and bias alone, type accuracy and the
     confusion matrix. The scorer is kept only where the held-out logs were clearly better with
-    it (fewer off by over 1 m, or a 5 % lower MSE); otherwise the report says it is dropped.
+    it (fewer off by over 1 m; or as many, and a 5 % lower MSE); otherwise the report says it
+    is dropped.
     The model file holds no pickle (JSON and skops); a model from another version is refused.
 
     Example:

@@ -67,7 +67,7 @@ FEATURE_NAMES: Final[tuple[str, ...]] = (
     "size_xy_est_m",  # median larger horizontal edge so scaled
     "aspect_med",  # median vertical / larger horizontal edge (the scaling cancels): flat or tall
     # the Mid-360 points' standard deviation in z about each detection's own mean, pooled over
-    # the detections with 2 Mid-360 points or more (unbiased whatever their count): the
+    # the detections with 2 Mid-360 points or more (its square unbiased at any count): the
     # airframe's height seen from the side. The Mid-360 sweeps a small target once a frame; the
     # Avia's rosette comes back to it through the 100 ms scan, so its points also spread with
     # the drone's motion
@@ -109,7 +109,7 @@ class TrackDetections:
     n_avia: NDArray[np.int64]  # (H,)
     cross: F64  # (H,) cross-section, m^2
     crowd: NDArray[np.int64]  # (H,) other clusters near the detection's (0 for raw-gate ones)
-    mid_z_ss: F64  # (H,) Mid-360 points' summed squared z deviations, m^2 (0 for raw-gate ones)
+    mid_z_ss: F64  # (H,) Mid-360 points' summed squared z deviations, m^2 (NaN: unknown)
 
     @property
     def both(self) -> NDArray[np.bool_]:
@@ -128,7 +128,7 @@ def track_detections(
     n_mid = rec.n_points.copy()
     n_avia = np.zeros(h, dtype=np.int64)
     crowd = np.zeros(h, dtype=np.int64)
-    mid_z_ss = np.zeros(h)
+    mid_z_ss = np.full(h, np.nan)
     for k in np.flatnonzero(~rec.raw):
         table, c = tables[rec.frames[k]], rec.clusters[k]
         extent[k] = table.extent[c]
@@ -238,7 +238,7 @@ def track_features(
 def _pooled_sd(ss: F64, counts: NDArray[np.int64], cl: NDArray[np.bool_]) -> float:
     """sqrt(sum of squared deviations / degrees of freedom) over the detections of clusters
     (``cl``) with 2 points or more (``counts``): the spread within one detection, whatever
-    the detections' point counts (NaN: no such detection)."""
+    the detections' point counts (NaN: no such detection, or one whose spread is unknown)."""
     ok = cl & (counts >= 2)
     dof = float(np.sum(counts[ok] - 1))
     return float(np.sqrt(np.sum(ss[ok]) / dof)) if dof > 0 else float("nan")

@@ -79,8 +79,9 @@ class ClusterTable:
         return np.full((len(self), 3), np.nan) if self.size is None else self.size
 
     def mid360_z_spreads(self) -> NDArray[np.float64]:
-        """(K,) each cluster's Mid-360 points' summed squared deviations from their mean z, m^2."""
-        return np.zeros(len(self)) if self.mid360_z_ss is None else self.mid360_z_ss
+        """(K,) each cluster's Mid-360 points' summed squared deviations from their mean z, m^2
+        (NaN: unknown)."""
+        return np.full(len(self), np.nan) if self.mid360_z_ss is None else self.mid360_z_ss
 
     def heights(self) -> NDArray[np.float64]:
         """(K,) each cluster's height above the local ground, metres (NaN: unknown)."""

@@ -117,6 +117,19 @@ def test_exact_at_eps_boundary_and_far_coordinates() -> None:
     assert len(set(labels.tolist())) == 3
 
 
+def test_the_mid360_height_spread_follows_each_points_label_in_any_order() -> None:
+    # labels out of order; cluster 0 holds one Mid-360 point (spread 0) and one Avia point,
+    # cluster 1 two Mid-360 points 0.4 m apart in z (about 100 m up) and an Avia point far off
+    points = np.array(
+        [[5, 0, 100.0], [0, 0, 1.0], [5, 0, 100.4], [9, 9, 3.0], [0, 0, 2.0], [5, 0, 90.0]]
+    )
+    labels = np.array([1, 0, 1, 2, 0, 1], dtype=np.int32)
+    clusters = summarize_clusters(points, labels, n_mid360=4)
+    assert [c.n_mid360 for c in clusters] == [1, 2, 1]
+    assert clusters[0].mid360_z_ss == 0.0 and clusters[2].mid360_z_ss == 0.0
+    assert clusters[1].mid360_z_ss == pytest.approx(2 * 0.2**2, rel=1e-9)
+
+
 def test_bad_arguments() -> None:
     with pytest.raises(ValueError, match="eps_m"):
         cluster_points(np.zeros((2, 3)), 0.0)

@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cldet.core.features import FEATURE_NAMES, TrackDetections, track_features
-from cldet.core.tracking import TrackRecord
+from cldet.config import CldetConfig
+from cldet.core.clustering import summarize_clusters
+from cldet.core.features import FEATURE_NAMES, TrackDetections, track_detections, track_features
+from cldet.core.tracking import ClusterTable, TrackRecord
 
 
 def _track(
@@ -77,3 +79,33 @@ def test_the_mid360_height_spread_tells_flat_from_tall_at_any_point_count() -> N
         assert tall == pytest.approx(0.19 / np.sqrt(12), rel=0.2)
     # the Avia's points do not count (its rosette smears a moving drone through the scan)
     assert np.isnan(_f(_track((0.30, 0.30, 0.19), 8, 8), "mid_sd_z_m"))
+
+
+def test_the_height_spread_reads_the_clusters_mid360_points_and_skips_raw_gate_detections() -> None:
+    """From frames' clusters (4 Mid-360 points over a flat airframe's 0.11 m, 4 Avia points
+    smeared over 1 m by its motion) through the tables: the Mid-360's spread alone; a raw-gate
+    detection, which has no cluster, is left out."""
+    rng = np.random.default_rng(9)
+    h = 40
+    tables = []
+    for _ in range(h):
+        mid = rng.uniform(0.0, 1.0, (4, 3)) * (0.35, 0.29, 0.11) + (10.0, 0.0, 5.0)
+        avia = rng.uniform(0.0, 1.0, (4, 3)) * (0.35, 0.29, 1.0) + (10.0, 0.0, 5.0)
+        points = np.vstack([mid, avia])
+        clusters = summarize_clusters(points, np.zeros(8, dtype=np.int32), n_mid360=4)
+        tables.append(ClusterTable.from_clusters(clusters))
+    clusters_of = np.zeros(h, dtype=np.int64)
+    clusters_of[5] = -1  # the raw-point gate's
+    rec = TrackRecord(
+        0,
+        np.arange(h),
+        clusters_of,
+        np.tile([10.0, 0.0, 5.0], (h, 1)),
+        np.full(h, 8),
+        np.ones(h),
+        np.zeros(h),
+    )
+    det = track_detections(rec, tables, CldetConfig().tracking)
+    assert np.isnan(det.mid_z_ss[5]) and np.isfinite(np.delete(det.mid_z_ss, 5)).all()
+    spread = _f(track_features(rec, det, np.arange(h) * 0.1), "mid_sd_z_m")
+    assert spread == pytest.approx(0.11 / np.sqrt(12), rel=0.25)  # the Avia's 1 m: ~0.29
