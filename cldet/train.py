@@ -397,6 +397,42 @@ class FoldResult:
     predicted_unscored: int | None  # the type voted over the chain chosen without the scorer
 
 
+def _fails(mse: float) -> bool:
+    """Whether a sequence with this MSE per coordinate is off by more than 1 m (3D RMS)."""
+    return bool(np.sqrt(3 * mse) > 1.0)
+
+
+@dataclass(frozen=True)
+class FoldTotals:
+    """The held-out logs' position error summed over the folds: MSE per coordinate (rows
+    weighted) and sequences off by more than 1 m, for the default, the learned model and the
+    learned model without its scorer."""
+
+    mse_default: float
+    mse_learned: float
+    mse_unscored: float
+    fails_default: int
+    fails_learned: int
+    fails_unscored: int
+
+    @staticmethod
+    def of(folds: Sequence[FoldResult]) -> FoldTotals:
+        """The totals of ``folds`` (at least one)."""
+        rows = np.array([f.rows for f in folds], dtype=np.float64)
+
+        def mse(values: list[float]) -> float:
+            return float(np.average(values, weights=rows))
+
+        return FoldTotals(
+            mse([f.mse_default for f in folds]),
+            mse([f.mse_learned for f in folds]),
+            mse([f.mse_unscored for f in folds]),
+            sum(f.fails_default for f in folds),
+            sum(f.fails_learned for f in folds),
+            sum(f.fails_unscored for f in folds),
+        )
+
+
 def _mse(sample: SequenceSample, estimates: Sequence[Estimate]) -> float:
     stamps = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
     pos = np.array([e.position for e in estimates], dtype=np.float64)
@@ -437,10 +473,10 @@ def cross_validate(
                 len(held.truth_ns),
                 mse_d,
                 mse_l,
-                bool(np.sqrt(3 * mse_d) > 1.0),
-                bool(np.sqrt(3 * mse_l) > 1.0),
+                _fails(mse_d),
+                _fails(mse_l),
                 mse_u,
-                bool(np.sqrt(3 * mse_u) > 1.0),
+                _fails(mse_u),
                 predicted_u,
             )
         )
@@ -458,19 +494,15 @@ def scorer_earns_its_place(folds: Sequence[FoldResult]) -> bool:
     refinement over the learned timing and bias alone: fewer sequences off by over 1 m, or as
     many and a position MSE (rows weighted) at least :data:`SCORER_MIN_GAIN` lower. A scorer
     fitted on a few logs can learn their accidents, and a tie on a few dozen held-out logs is
-    no evidence that it helps; without it the packaged prior (``tracking.prior_scorer``) still
-    weighs the tracks (with ``tracking.prior_scorer`` on, the default). No cross-validation
-    (``folds`` empty): kept as trained. A fold whose MSE is not finite counts against it."""
+    no evidence that it helps; without it the packaged prior still weighs the tracks (where
+    ``tracking.prior_scorer`` is on, the default). No cross-validation (``folds`` empty): kept
+    as trained. A fold whose MSE is not finite counts against it."""
     if not folds:
         return True
-    rows = np.array([f.rows for f in folds], dtype=np.float64)
-    with_mse = float(np.average([f.mse_learned for f in folds], weights=rows))
-    without_mse = float(np.average([f.mse_unscored for f in folds], weights=rows))
-    with_fails = sum(f.fails_learned for f in folds)
-    without_fails = sum(f.fails_unscored for f in folds)
-    if with_fails != without_fails:
-        return with_fails < without_fails
-    return with_mse <= (1.0 - SCORER_MIN_GAIN) * without_mse
+    t = FoldTotals.of(folds)
+    if t.fails_learned != t.fails_unscored:
+        return t.fails_learned < t.fails_unscored
+    return t.mse_learned <= (1.0 - SCORER_MIN_GAIN) * t.mse_unscored
 
 
 # ---------------------------------------------------------------------------- command
@@ -494,20 +526,16 @@ class TrainReport:
         ]
         if self.folds:
             n = len(self.folds)
-            rows = np.array([f.rows for f in self.folds], dtype=np.float64)
-            mse_d = float(np.average([f.mse_default for f in self.folds], weights=rows))
-            mse_l = float(np.average([f.mse_learned for f in self.folds], weights=rows))
-            fd = sum(f.fails_default for f in self.folds)
-            fl = sum(f.fails_learned for f in self.folds)
-            mse_u = float(np.average([f.mse_unscored for f in self.folds], weights=rows))
-            fu = sum(f.fails_unscored for f in self.folds)
+            t = FoldTotals.of(self.folds)
             lines.append(
                 f"leave-one-sequence-out over {n} logs: position MSE per coordinate default"
-                f" {mse_d:.4f} m^2 -> learned {mse_l:.4f} m^2 (without the learned scorer"
-                f" {mse_u:.4f}); sequences off by more than 1 m (RMS): default {fd}, learned {fl}"
-                f" (without the scorer {fu})"
+                f" {t.mse_default:.4f} m^2 -> learned {t.mse_learned:.4f} m^2 (without the"
+                f" learned scorer {t.mse_unscored:.4f}); sequences off by more than 1 m (RMS):"
+                f" default {t.fails_default}, learned {t.fails_learned} (without the scorer"
+                f" {t.fails_unscored})"
             )
-            if m.info.get("scorer") == "dropped":
+            dropped = m.info.get("scorer") == "dropped"
+            if dropped:
                 lines.append(
                     "the learned drone-vs-clutter scorer did not clearly improve the held-out"
                     " logs: not kept (the model keeps the timing, the bias and the type"
@@ -517,7 +545,6 @@ class TrainReport:
             true = [int(f.true_class) for f in typed if f.true_class is not None]
             # no chain, no type: counted wrong (and left out of the matrix)
             # the type of the chain the written model picks: with or without its scorer
-            dropped = m.info.get("scorer") == "dropped"
             voted = [f.predicted_unscored if dropped else f.predicted_class for f in typed]
             pred = [-1 if v is None else v for v in voted]
             if typed and m.class_ids:
