@@ -451,6 +451,14 @@ class SmoothingConfig(BaseModel):
         " beyond a straight run the extrapolation keeps the run's velocity for straight_hold_factor"
         " times as long as the run lasted, then decays",
     )
+    straight_min_points: int = Field(
+        default=3,
+        ge=3,
+        description="a straight run needs this many detections at least (3: the fewest that test"
+        " a line). Its duration is not gated: a transit seen for only half a second still keeps"
+        " its velocity for straight_hold_factor times that, where a decay from the first moment"
+        " would stop a 15 m/s pass within metres",
+    )
     straight_min_speed_mps: float = Field(
         default=3.0,
         ge=0,

@@ -907,7 +907,7 @@ def _extrapolation_ends(
     """Where the extrapolation beyond the start (key 0) and the end (key -1) of the detections
     ``z`` at times ``t`` starts, its velocity, and how long that holds before it decays: the
     smoother's end state (``position``, ``velocity``), not held; but where the detections
-    ending (starting) the track run straight for longer than ``extrapolation_tau_s`` at
+    ending (starting) the track run straight (``straight_min_points`` or more, however short) at
     ``straight_min_speed_mps`` or more (a transit, not a hover), the run's own line: its
     position at the end detection's time and its velocity, fitted to the whole run (the
     smoother's end state rests on the last few detections, each smeared along the path by the
@@ -918,12 +918,8 @@ def _extrapolation_ends(
     if cfg.straight_rms_m <= 0:
         return ends
     for key, (tt, zz, sign) in {0: (-t[::-1], z[::-1], -1.0), -1: (t, z, 1.0)}.items():
-        run = straight_run(tt, zz, cfg.straight_rms_m, scan_s)
-        if (
-            run is not None
-            and run.duration_s > cfg.extrapolation_tau_s
-            and float(np.linalg.norm(run.velocity)) >= cfg.straight_min_speed_mps
-        ):
+        run = straight_run(tt, zz, cfg.straight_rms_m, scan_s, cfg.straight_min_points)
+        if run is not None and float(np.linalg.norm(run.velocity)) >= cfg.straight_min_speed_mps:
             hold_s = min(cfg.straight_hold_factor * run.duration_s, cfg.straight_max_hold_s)
             ends[key] = (run.position, sign * run.velocity, hold_s)
     return ends
