@@ -20,7 +20,11 @@ Printed per method, overall, per scenario kind, per site and by visibility (the 
 returning a point in under 10 % of frames, or not): sequences, failures with a 95 %
 Wilson interval, MSE per coordinate (sum of squared errors / 3N over all truth rows), mean
 squared 3D distance (sum / N), median and worst RMS, and "seen": the median fraction of frames
-with at least one point on the drone (fast passes and high hovers are sparse by design).
+with at least one point on the drone (fast passes and high hovers are sparse by design). Then,
+per method, where its summed squared error lies, over all sequences and over the failing ones:
+before the estimate's first DETECTED row, in the gaps between detections, on rows whose nearest
+estimate is DETECTED (a detection of the chosen track, the drone or not), after the last, or in
+sequences with no detection at all (``error_parts``; the rows' ``parts`` in ``--json``).
 
     python benchmarks/bench_robustness.py --seeds 10000-10119            # development
     python benchmarks/bench_robustness.py                                 # evaluation, 300 worlds
@@ -100,15 +104,64 @@ def at_stamps(estimates: Sequence[Any], stamps_ns: NDArray[np.int64]) -> NDArray
     return np.column_stack([np.interp(q, tt, pos[order, k]) for k in range(3)])
 
 
+def _squared(
+    estimates: Sequence[Any] | None, stamps_ns: NDArray[np.int64], truth: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(N,) squared 3D error at each truth row; no estimates at all count as the origin."""
+    pos = at_stamps(estimates or (), stamps_ns)
+    if pos is None:
+        pos = np.zeros_like(truth)
+    return np.sum((pos - truth) ** 2, axis=1)
+
+
 def score(
     estimates: Sequence[Any] | None, stamps_ns: NDArray[np.int64], truth: NDArray[np.float64]
 ) -> tuple[float, float, int]:
     """(RMS 3D error, sum of squared 3D errors, rows); no estimates at all count as the origin."""
-    pos = at_stamps(estimates or (), stamps_ns)
-    if pos is None:
-        pos = np.zeros_like(truth)
-    sq = np.sum((pos - truth) ** 2, axis=1)
+    sq = _squared(estimates, stamps_ns, truth)
     return float(np.sqrt(np.mean(sq))), float(np.sum(sq)), int(len(sq))
+
+
+PARTS = ("before", "gaps", "detected", "after", "undetected")
+PART_NAMES = {
+    "before": "before the first detection",
+    "gaps": "in gaps",
+    "detected": "on detected frames",
+    "after": "after the last detection",
+    "undetected": "in sequences never detected",
+}
+
+
+def error_parts(
+    estimates: Sequence[Any] | None, stamps_ns: NDArray[np.int64], truth: NDArray[np.float64]
+) -> dict[str, float]:
+    """The sum of squared 3D errors split by where each truth row lies (``PARTS``): before the
+    first DETECTED estimate, after the last, on a row whose nearest estimate is DETECTED, in the
+    gaps between; all "undetected" when no estimate is DETECTED."""
+    sq = _squared(estimates, stamps_ns, truth)
+    parts = dict.fromkeys(PARTS, 0.0)
+    est = sorted(estimates or (), key=lambda e: e.stamp_ns)
+    t = np.array([e.stamp_ns for e in est], dtype=np.int64)
+    detected = np.array([e.source.name == "DETECTED" for e in est], dtype=bool)
+    if not detected.any():
+        parts["undetected"] = float(sq.sum())
+        return parts
+    first, last = t[detected][[0, -1]]
+    right = (
+        np.clip(np.searchsorted(t, stamps_ns), 1, len(t) - 1)
+        if len(t) > 1
+        else np.zeros(len(stamps_ns), dtype=np.int64)
+    )
+    left = np.maximum(right - 1, 0)
+    nearest = np.where(np.abs(t[left] - stamps_ns) <= np.abs(t[right] - stamps_ns), left, right)
+    where = np.where(
+        stamps_ns < first,
+        "before",
+        np.where(stamps_ns > last, "after", np.where(detected[nearest], "detected", "gaps")),
+    )
+    for part in ("before", "gaps", "detected", "after"):
+        parts[part] = float(sq[where == part].sum())
+    return parts
 
 
 @dataclass(frozen=True)
@@ -188,14 +241,16 @@ def _method_rows(
             rms, sse, n = score(chosen, stamps_m, truth_m)
             rows.append(
                 {**common, "method": method, "rms": rms, "sse": sse, "n": n,
+                 "parts": error_parts(chosen, stamps_m, truth_m),
                  "coverage": coverage, "seconds": seconds, "error": error}
             )  # fmt: skip
     if "track-model" in job.methods:
         est, seconds, error = _estimate(frames, "track", job.config, job.model)
-        rms, sse, n = score(None if est is None else est.estimates, stamps_ns, truth)
+        chosen = None if est is None else est.estimates
+        rms, sse, n = score(chosen, stamps_ns, truth)
         rows.append(
             {**common, "method": "track-model", "rms": rms, "sse": sse, "n": n,
-             "seconds": seconds, "error": error}
+             "parts": error_parts(chosen, stamps_ns, truth), "seconds": seconds, "error": error}
         )  # fmt: skip
     if "cl-det" in job.methods:
         est, seconds, error = _estimate(frames, "cl-det", job.config)
@@ -329,6 +384,20 @@ def _visibility(row: dict[str, Any]) -> str:
     return VISIBILITY[0] if row.get("seen", 1.0) < SEEN_FEW else VISIBILITY[1]
 
 
+def where_errors_lie(rows: list[dict[str, Any]]) -> str:
+    """The shares of the rows' summed squared error in each of ``PARTS`` (``error_parts``),
+    over all rows and over the failing ones; "" when no row carries its parts."""
+    with_parts = [r for r in rows if r.get("parts") and r["rms"] is not None]
+    if not with_parts:
+        return ""
+    shares = []
+    for group in (with_parts, [r for r in with_parts if r["rms"] > FAIL_RMS_M]):
+        total = {p: sum(r["parts"][p] for r in group) for p in PARTS}
+        whole = sum(total.values())
+        shares.append({p: 100 * total[p] / whole if whole > 0 else 0.0 for p in PARTS})
+    return ", ".join(f"{PART_NAMES[p]} {shares[0][p]:.0f} % / {shares[1][p]:.0f} %" for p in PARTS)
+
+
 def report(rows: list[dict[str, Any]], methods: Sequence[str], duration_s: float) -> None:
     """Print the overall, per-kind, per-site and visibility tables of every method."""
     from cldet.simulate import KINDS, SITES
@@ -356,6 +425,9 @@ def report(rows: list[dict[str, Any]], methods: Sequence[str], duration_s: float
             f" fast pass mostly out of reach or hidden, where most of the track is a guess)\n{HEADER}"
         )
         print("\n".join(table(visible, method, "visibility", VISIBILITY)[:-1]))  # fmt: skip
+        split = where_errors_lie(mine)
+        if split:
+            print(f"{method}, where the squared error lies (all sequences / failing ones): {split}")
     times: dict[str, list[float]] = {}
     for r in rows:
         if r.get("seconds") is not None:

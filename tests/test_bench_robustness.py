@@ -58,3 +58,36 @@ def test_score_interpolates_and_clamps(bench: ModuleType) -> None:
     assert rms == pytest.approx(np.sqrt(1.0 / 3.0))
     rms, sse, _ = bench.score(None, stamps, truth)  # no estimate: the origin
     assert sse == pytest.approx(1.0 + 4.0 + 1.0)
+
+
+def test_the_squared_error_is_split_by_where_each_row_lies(bench: ModuleType) -> None:
+    # estimates at 1..5 us: predicted, detected, smoothed (a gap), detected, predicted; one
+    # truth row before them all (clamped to the first), one at each, one after them all
+    sources = [Source.PREDICTED, Source.DETECTED, Source.SMOOTHED, Source.DETECTED]
+    sources.append(Source.PREDICTED)
+    est = [
+        Estimate(1_000 * (k + 1), np.array([float(k), 0.0, 0.0]), src, 1, 0.1)
+        for k, src in enumerate(sources)
+    ]
+    stamps = np.array([0, 1_000, 2_000, 3_000, 4_000, 5_000, 6_000], dtype=np.int64)
+    truth = np.zeros((7, 3))
+    truth[:, 0] = [0.0, 1.0, 1.0, 3.0, 3.0, 6.0, 6.0]  # errors 0, 1, 0, 1, 0, 2, 2
+    parts = bench.error_parts(est, stamps, truth)
+    assert parts == {
+        "before": pytest.approx(0.0 + 1.0),  # rows at 0 and 1 us: before the first detection
+        "detected": pytest.approx(0.0 + 0.0),  # 2 and 4 us
+        "gaps": pytest.approx(1.0),  # 3 us
+        "after": pytest.approx(4.0 + 4.0),  # 5 and 6 us
+        "undetected": 0.0,
+    }
+    assert sum(parts.values()) == pytest.approx(bench.score(est, stamps, truth)[1])
+    never = [Estimate(e.stamp_ns, e.position, Source.PREDICTED, 0, 1.0) for e in est]
+    assert bench.error_parts(never, stamps, truth)["undetected"] == pytest.approx(10.0)
+    rows = [
+        {"rms": 0.5, "parts": {**dict.fromkeys(bench.PARTS, 0.0), "detected": 1.0}},
+        {"rms": 2.0, "parts": {**dict.fromkeys(bench.PARTS, 0.0), "after": 3.0}},
+    ]
+    line = bench.where_errors_lie(rows)
+    assert (
+        "on detected frames 25 % / 0 %" in line and "after the last detection 75 % / 100 %" in line
+    )
