@@ -254,10 +254,11 @@ def _method_rows(
         )  # fmt: skip
     if "cl-det" in job.methods:
         est, seconds, error = _estimate(frames, "cl-det", job.config)
-        rms, sse, n = score(None if est is None else est.estimates, stamps_ns, truth)
+        chosen = None if est is None else est.estimates
+        rms, sse, n = score(chosen, stamps_ns, truth)
         rows.append(
             {**common, "method": "cl-det", "rms": rms, "sse": sse, "n": n,
-             "seconds": seconds, "error": error}
+             "parts": error_parts(chosen, stamps_ns, truth), "seconds": seconds, "error": error}
         )  # fmt: skip
     return rows
 
@@ -386,16 +387,27 @@ def _visibility(row: dict[str, Any]) -> str:
 
 def where_errors_lie(rows: list[dict[str, Any]]) -> str:
     """The shares of the rows' summed squared error in each of ``PARTS`` (``error_parts``),
-    over all rows and over the failing ones; "" when no row carries its parts."""
-    with_parts = [r for r in rows if r.get("parts") and r["rms"] is not None]
+    over all rows and over the failing ones ("no failures" where none fails); "" when no row
+    carries its parts; rows without (from an older ``--json``, resumed) are counted out."""
+    scored = [r for r in rows if r["rms"] is not None]
+    with_parts = [r for r in scored if r.get("parts")]
     if not with_parts:
         return ""
+    failing = [r for r in with_parts if r["rms"] > FAIL_RMS_M]
     shares = []
-    for group in (with_parts, [r for r in with_parts if r["rms"] > FAIL_RMS_M]):
+    for group in (with_parts, failing):
         total = {p: sum(r["parts"][p] for r in group) for p in PARTS}
         whole = sum(total.values())
         shares.append({p: 100 * total[p] / whole if whole > 0 else 0.0 for p in PARTS})
-    return ", ".join(f"{PART_NAMES[p]} {shares[0][p]:.0f} % / {shares[1][p]:.0f} %" for p in PARTS)
+    line = ", ".join(
+        f"{PART_NAMES[p]} {shares[0][p]:.0f} %" + (f" / {shares[1][p]:.0f} %" if failing else "")
+        for p in PARTS
+    )
+    if not failing:
+        line += " (no failures)"
+    if len(with_parts) < len(scored):
+        line += f" (over the {len(with_parts)} of {len(scored)} sequences whose rows carry it)"
+    return line
 
 
 def report(rows: list[dict[str, Any]], methods: Sequence[str], duration_s: float) -> None:

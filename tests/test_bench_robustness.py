@@ -91,3 +91,12 @@ def test_the_squared_error_is_split_by_where_each_row_lies(bench: ModuleType) ->
     assert (
         "on detected frames 25 % / 0 %" in line and "after the last detection 75 % / 100 %" in line
     )
+    assert "no failures" in bench.where_errors_lie(rows[:1])
+    resumed = bench.where_errors_lie([*rows, {"rms": 3.0}])  # a row from an older --json
+    assert "over the 2 of 3 sequences" in resumed
+    # one estimate (at 2 us, the origin): the rows before it, on it, and after it
+    one = [Estimate(2_000, np.zeros(3), Source.DETECTED, 1, 0.1)]
+    split = bench.error_parts(one, stamps, truth)
+    assert split["before"] == pytest.approx(0.0 + 1.0) and split["detected"] == pytest.approx(1.0)
+    assert split["after"] == pytest.approx(9.0 + 9.0 + 36.0 + 36.0)
+    assert bench.error_parts(est[::-1], stamps, truth) == parts  # the order given does not matter
