@@ -104,24 +104,6 @@ def at_stamps(estimates: Sequence[Any], stamps_ns: NDArray[np.int64]) -> NDArray
     return np.column_stack([np.interp(q, tt, pos[order, k]) for k in range(3)])
 
 
-def _squared(
-    estimates: Sequence[Any] | None, stamps_ns: NDArray[np.int64], truth: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """(N,) squared 3D error at each truth row; no estimates at all count as the origin."""
-    pos = at_stamps(estimates or (), stamps_ns)
-    if pos is None:
-        pos = np.zeros_like(truth)
-    return np.sum((pos - truth) ** 2, axis=1)
-
-
-def score(
-    estimates: Sequence[Any] | None, stamps_ns: NDArray[np.int64], truth: NDArray[np.float64]
-) -> tuple[float, float, int]:
-    """(RMS 3D error, sum of squared 3D errors, rows); no estimates at all count as the origin."""
-    sq = _squared(estimates, stamps_ns, truth)
-    return float(np.sqrt(np.mean(sq))), float(np.sum(sq)), int(len(sq))
-
-
 PARTS = ("before", "gaps", "detected", "after", "undetected")
 PART_NAMES = {
     "before": "before the first detection",
@@ -132,28 +114,38 @@ PART_NAMES = {
 }
 
 
-def error_parts(
+def score(
     estimates: Sequence[Any] | None, stamps_ns: NDArray[np.int64], truth: NDArray[np.float64]
+) -> dict[str, Any]:
+    """A row's scores: ``rms`` (3D error), ``sse`` (sum of squared 3D errors), ``n`` (rows) and
+    ``parts`` (``error_parts``); no estimates at all count as the origin."""
+    pos = at_stamps(estimates or (), stamps_ns)
+    if pos is None:
+        pos = np.zeros_like(truth)
+    sq = np.sum((pos - truth) ** 2, axis=1)
+    return {
+        "rms": float(np.sqrt(np.mean(sq))),
+        "sse": float(np.sum(sq)),
+        "n": int(len(sq)),
+        "parts": error_parts(estimates, stamps_ns, sq),
+    }
+
+
+def error_parts(
+    estimates: Sequence[Any] | None, stamps_ns: NDArray[np.int64], sq: NDArray[np.float64]
 ) -> dict[str, float]:
-    """The sum of squared 3D errors split by where each truth row lies (``PARTS``): before the
-    first DETECTED estimate, after the last, on a row whose nearest estimate is DETECTED, in the
-    gaps between; all "undetected" when no estimate is DETECTED."""
-    sq = _squared(estimates, stamps_ns, truth)
+    """The squared 3D errors ``sq`` at ``stamps_ns`` summed by where each truth row lies
+    (``PARTS``): before the first DETECTED estimate, after the last, on a row whose nearest
+    estimate is DETECTED, in the gaps between; all "undetected" when no estimate is DETECTED."""
     parts = dict.fromkeys(PARTS, 0.0)
-    est = sorted(estimates or (), key=lambda e: e.stamp_ns)
+    est = sorted(estimates or (), key=lambda e: e.stamp_ns)  # a tie goes to the earlier
     t = np.array([e.stamp_ns for e in est], dtype=np.int64)
     detected = np.array([e.source.name == "DETECTED" for e in est], dtype=bool)
     if not detected.any():
         parts["undetected"] = float(sq.sum())
         return parts
     first, last = t[detected][[0, -1]]
-    right = (
-        np.clip(np.searchsorted(t, stamps_ns), 1, len(t) - 1)
-        if len(t) > 1
-        else np.zeros(len(stamps_ns), dtype=np.int64)
-    )
-    left = np.maximum(right - 1, 0)
-    nearest = np.where(np.abs(t[left] - stamps_ns) <= np.abs(t[right] - stamps_ns), left, right)
+    nearest = np.argmin(np.abs(stamps_ns[:, None] - t[None, :]), axis=1)
     where = np.where(
         stamps_ns < first,
         "before",
@@ -238,27 +230,23 @@ def _method_rows(
                     stamps_m, truth_m = stamps_ns, truth
             else:
                 stamps_m, truth_m = stamps_ns, truth
-            rms, sse, n = score(chosen, stamps_m, truth_m)
             rows.append(
-                {**common, "method": method, "rms": rms, "sse": sse, "n": n,
-                 "parts": error_parts(chosen, stamps_m, truth_m),
+                {**common, "method": method, **score(chosen, stamps_m, truth_m),
                  "coverage": coverage, "seconds": seconds, "error": error}
             )  # fmt: skip
     if "track-model" in job.methods:
         est, seconds, error = _estimate(frames, "track", job.config, job.model)
         chosen = None if est is None else est.estimates
-        rms, sse, n = score(chosen, stamps_ns, truth)
         rows.append(
-            {**common, "method": "track-model", "rms": rms, "sse": sse, "n": n,
-             "parts": error_parts(chosen, stamps_ns, truth), "seconds": seconds, "error": error}
+            {**common, "method": "track-model", **score(chosen, stamps_ns, truth),
+             "seconds": seconds, "error": error}
         )  # fmt: skip
     if "cl-det" in job.methods:
         est, seconds, error = _estimate(frames, "cl-det", job.config)
         chosen = None if est is None else est.estimates
-        rms, sse, n = score(chosen, stamps_ns, truth)
         rows.append(
-            {**common, "method": "cl-det", "rms": rms, "sse": sse, "n": n,
-             "parts": error_parts(chosen, stamps_ns, truth), "seconds": seconds, "error": error}
+            {**common, "method": "cl-det", **score(chosen, stamps_ns, truth),
+             "seconds": seconds, "error": error}
         )  # fmt: skip
     return rows
 

@@ -53,11 +53,11 @@ def test_score_interpolates_and_clamps(bench: ModuleType) -> None:
     ]
     stamps = np.array([0, 2_000, 4_000], dtype=np.int64)
     truth = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 1.0]])
-    rms, sse, n = bench.score(est, stamps, truth)
-    assert (sse, n) == (pytest.approx(1.0), 3)
-    assert rms == pytest.approx(np.sqrt(1.0 / 3.0))
-    rms, sse, _ = bench.score(None, stamps, truth)  # no estimate: the origin
-    assert sse == pytest.approx(1.0 + 4.0 + 1.0)
+    scores = bench.score(est, stamps, truth)
+    assert (scores["sse"], scores["n"]) == (pytest.approx(1.0), 3)
+    assert scores["rms"] == pytest.approx(np.sqrt(1.0 / 3.0))
+    scores = bench.score(None, stamps, truth)  # no estimate: the origin
+    assert scores["sse"] == pytest.approx(1.0 + 4.0 + 1.0)
 
 
 def test_the_squared_error_is_split_by_where_each_row_lies(bench: ModuleType) -> None:
@@ -72,7 +72,8 @@ def test_the_squared_error_is_split_by_where_each_row_lies(bench: ModuleType) ->
     stamps = np.array([0, 1_000, 2_000, 3_000, 4_000, 5_000, 6_000], dtype=np.int64)
     truth = np.zeros((7, 3))
     truth[:, 0] = [0.0, 1.0, 1.0, 3.0, 3.0, 6.0, 6.0]  # errors 0, 1, 0, 1, 0, 2, 2
-    parts = bench.error_parts(est, stamps, truth)
+    scores = bench.score(est, stamps, truth)
+    parts = scores["parts"]
     assert parts == {
         "before": pytest.approx(0.0 + 1.0),  # rows at 0 and 1 us: before the first detection
         "detected": pytest.approx(0.0 + 0.0),  # 2 and 4 us
@@ -80,9 +81,9 @@ def test_the_squared_error_is_split_by_where_each_row_lies(bench: ModuleType) ->
         "after": pytest.approx(4.0 + 4.0),  # 5 and 6 us
         "undetected": 0.0,
     }
-    assert sum(parts.values()) == pytest.approx(bench.score(est, stamps, truth)[1])
+    assert sum(parts.values()) == pytest.approx(scores["sse"])
     never = [Estimate(e.stamp_ns, e.position, Source.PREDICTED, 0, 1.0) for e in est]
-    assert bench.error_parts(never, stamps, truth)["undetected"] == pytest.approx(10.0)
+    assert bench.score(never, stamps, truth)["parts"]["undetected"] == pytest.approx(10.0)
     rows = [
         {"rms": 0.5, "parts": {**dict.fromkeys(bench.PARTS, 0.0), "detected": 1.0}},
         {"rms": 2.0, "parts": {**dict.fromkeys(bench.PARTS, 0.0), "after": 3.0}},
@@ -96,7 +97,7 @@ def test_the_squared_error_is_split_by_where_each_row_lies(bench: ModuleType) ->
     assert "over the 2 of 3 sequences" in resumed
     # one estimate (at 2 us, the origin): the rows before it, on it, and after it
     one = [Estimate(2_000, np.zeros(3), Source.DETECTED, 1, 0.1)]
-    split = bench.error_parts(one, stamps, truth)
+    split = bench.score(one, stamps, truth)["parts"]
     assert split["before"] == pytest.approx(0.0 + 1.0) and split["detected"] == pytest.approx(1.0)
     assert split["after"] == pytest.approx(9.0 + 9.0 + 36.0 + 36.0)
-    assert bench.error_parts(est[::-1], stamps, truth) == parts  # the order given does not matter
+    assert bench.score(est[::-1], stamps, truth)["parts"] == parts  # the order does not matter
