@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cldet.config import load_config
+from cldet.config import CldetConfig, load_config
 from cldet.core.bias import fit_bias_sequences
 from cldet.core.estimator import (
     FrameDetections,
@@ -558,24 +558,30 @@ def test_the_causal_estimate_waits_for_confirmation() -> None:
     assert worst(0.0) > 5.0  # the rule is needed here
 
 
+def _crossing(seed: int, n: int, first: int, last: int) -> tuple[list[LidarFrame], np.ndarray]:
+    """``n`` scans (10 Hz) of a drone crossing at 15 m/s, 15 m out at its closest, returning
+    points in scans ``first``-``last`` only: (frames, its true position per scan (n,3))."""
+    truth = np.array([[15.0, -60.0 + 1.5 * k, 4.0] for k in range(n)])
+    return _with_objects(
+        seed, n, lambda k: [(tuple(truth[k]), 0.25)] if first <= k <= last else []
+    ), truth
+
+
+def _instant_scans(smoothing: dict[str, object]) -> CldetConfig:
+    """The configuration with ``smoothing`` overrides, for the test scene's scans: they are
+    instantaneous (no scan offset)."""
+    return load_config(overrides={"frames": {"scan_offset_s": 0.0}, "smoothing": smoothing})
+
+
 def test_a_straight_pass_seen_only_midway_is_extrapolated_along_its_line() -> None:
     # a drone crossing at 15 m/s, 15-27 m out, returns points only in scans 25-55 of 80 (out
     # of range or hidden before and after); it flew straight while seen, so inertia carries it
     # on along that line for about as long, where a decaying velocity stops it short. The
     # causal estimate, once the track is lost, carries it on the same way from its past alone
-    def drone(k: int) -> np.ndarray:
-        return np.array([15.0, -60.0 + 1.5 * k, 4.0])
-
-    frames = _with_objects(0, 80, lambda k: [(tuple(drone(k)), 0.25)] if 25 <= k <= 55 else [])
-    truth = np.array([drone(k) for k in range(80)])
+    frames, truth = _crossing(0, 80, 25, 55)
 
     def rms(straight_rms_m: float) -> tuple[float, float]:
-        cfg = load_config(
-            overrides={
-                "smoothing": {"straight_rms_m": straight_rms_m},
-                "frames": {"scan_offset_s": 0.0},  # the test scene's scans are instantaneous
-            }
-        )
+        cfg = _instant_scans({"straight_rms_m": straight_rms_m})
         _, result = estimate_sequence(frames, cfg)
         assert sum(e.source == Source.DETECTED for e in result.estimates) >= 25
         causal = np.array([e.position for e in result.causal[56:]])
@@ -595,26 +601,41 @@ def test_a_transit_seen_briefly_is_carried_on_for_longer_than_it_was_seen() -> N
     # the crossing above (15 m/s, 15 m out at its closest), seen in scans 38-55 only (1.7 s),
     # then flying on out of reach for 2.4 s: a drone in transit keeps going; held only as long
     # as it was seen, its velocity decays 1.5 s on and the end falls metres short
-    def drone(k: int) -> np.ndarray:
-        return np.array([15.0, -60.0 + 1.5 * k, 4.0])
-
-    n = 80
-    frames = _with_objects(4, n, lambda k: [(tuple(drone(k)), 0.25)] if 38 <= k <= 55 else [])
-    truth = np.array([drone(k) for k in range(n)])
+    frames, truth = _crossing(4, 80, 38, 55)
 
     def end_error(factor: float) -> float:
-        cfg = load_config(
-            overrides={
-                "smoothing": {"straight_hold_factor": factor},
-                "frames": {"scan_offset_s": 0.0},  # the test scene's scans are instantaneous
-            }
-        )
+        cfg = _instant_scans({"straight_hold_factor": factor})
         _, result = estimate_sequence(frames, cfg)
         pos = np.array([e.position for e in result.estimates])
         return float(np.max(np.linalg.norm(pos[-10:] - truth[-10:], axis=1)))
 
     assert end_error(2.0) < 0.7
     assert end_error(1.0) > 1.5
+
+
+@pytest.mark.parametrize(("last_scan", "limit_m"), [(43, 0.7), (40, 1.5)])
+def test_a_transit_seen_for_half_a_second_keeps_its_velocity_for_a_while(
+    last_scan: int, limit_m: float
+) -> None:
+    # the crossing above (15 m/s) seen from scan 38 to ``last_scan`` only (6 scans, 0.5 s, or
+    # 3, the fewest that make a straight run), out of reach before and after: however short,
+    # a straight run at transit speed is inertia's evidence; carried on for twice as long as it
+    # was seen before decaying, the refined track stays near the drone in the second before the
+    # first detection and the second after the last, where a velocity decaying from the track's
+    # ends (as when only runs longer than the decay's 1.5 s were held) falls metres behind
+    frames, truth = _crossing(4, 60, 38, last_scan)
+
+    def worst_beyond(straight_rms_m: float) -> float:
+        cfg = _instant_scans({"straight_rms_m": straight_rms_m})
+        _, result = estimate_sequence(frames, cfg)
+        detected = [e.source == Source.DETECTED for e in result.estimates]
+        assert sum(detected) == last_scan - 37
+        pos = np.array([e.position for e in result.estimates])
+        beyond = np.r_[28:38, last_scan + 1 : last_scan + 11]  # a second before, a second after
+        return float(np.max(np.linalg.norm(pos[beyond] - truth[beyond], axis=1)))
+
+    assert worst_beyond(0.4) < limit_m  # 0.35 m with 6 detections, 1.1 m with 3
+    assert worst_beyond(0.0) > 3.0  # 4.4 and 3.8 m: the straight run's rule off
 
 
 def _walk_then_unseen(
@@ -633,12 +654,7 @@ def _walk_then_unseen(
     from cldet.core.estimator import Candidates, refine_candidates
     from cldet.core.tracking import ClusterTable, TrackRecord
 
-    cfg = load_config(
-        overrides={
-            "frames": {"scan_offset_s": 0.0},
-            "smoothing": {"unseen_check_s": check_s, "came_to_rest": rest},
-        }
-    )
+    cfg = _instant_scans({"unseen_check_s": check_s, "came_to_rest": rest})
     n, seen = 60, np.arange(10, 30)
     pos = np.array([[10.0, -3.0 + 0.2 * (k - 10), 2.0] for k in seen])
     one = np.ones(1, dtype=np.int64)
@@ -897,12 +913,7 @@ def test_a_missed_frame_of_a_straight_pass_follows_the_runs_line(seed: int) -> N
     frames = _with_objects(seed, 40, objects)
 
     def worst_missed(straight: bool) -> float:
-        cfg = load_config(
-            overrides={
-                "frames": {"scan_offset_s": 0.0},  # the test scans are instantaneous
-                "smoothing": {"causal_straight_coast": straight},
-            }
-        )
+        cfg = _instant_scans({"causal_straight_coast": straight})
         _, result = estimate_sequence(frames, cfg)
         missed = [(k, e) for k, e in enumerate(result.causal) if 30 <= k < 35]
         assert all(e.source == Source.PREDICTED for _, e in missed)
@@ -921,40 +932,3 @@ def test_a_known_mount_is_the_estimators_ground_from_the_start() -> None:
     assert ground.fitted and ground.offset == 2.4
     np.testing.assert_allclose(ground.normal, [0.0, 0.0, 1.0])
     assert not TrackEstimator(load_config()).background.ground.fitted  # fitted to the data
-
-
-@pytest.mark.parametrize(("last_scan", "limit_m"), [(43, 0.7), (40, 1.5)])
-def test_a_transit_seen_for_half_a_second_keeps_its_velocity_for_a_while(
-    last_scan: int, limit_m: float
-) -> None:
-    # the crossing above (15 m/s) seen from scan 38 to ``last_scan`` only (6 scans, 0.5 s, or
-    # 3, the fewest that make a straight run), out of reach before and after: however short,
-    # a straight run at transit speed is inertia's evidence; carried on for twice as long as it
-    # was seen before decaying, the refined track stays near the drone in the second before the
-    # first detection and the second after the last, where a velocity decaying from the track's
-    # ends (as when only runs longer than the decay's 1.5 s were held) falls metres behind
-    def drone(k: int) -> np.ndarray:
-        return np.array([15.0, -60.0 + 1.5 * k, 4.0])
-
-    n = 60
-    frames = _with_objects(
-        4, n, lambda k: [(tuple(drone(k)), 0.25)] if 38 <= k <= last_scan else []
-    )
-    truth = np.array([drone(k) for k in range(n)])
-
-    def worst_beyond(straight_rms_m: float) -> float:
-        cfg = load_config(
-            overrides={
-                "smoothing": {"straight_rms_m": straight_rms_m},
-                "frames": {"scan_offset_s": 0.0},  # the test scene's scans are instantaneous
-            }
-        )
-        _, result = estimate_sequence(frames, cfg)
-        detected = [e.source == Source.DETECTED for e in result.estimates]
-        assert sum(detected) == last_scan - 37
-        pos = np.array([e.position for e in result.estimates])
-        beyond = np.r_[28:38, last_scan + 1 : last_scan + 11]  # a second before, a second after
-        return float(np.max(np.linalg.norm(pos[beyond] - truth[beyond], axis=1)))
-
-    assert worst_beyond(0.4) < limit_m  # 0.35 m with 6 detections, 1.1 m with 3
-    assert worst_beyond(0.0) > 3.0  # 4.4 and 3.8 m: the straight run's rule off
