@@ -259,10 +259,6 @@ def run_world(job: Job) -> list[dict[str, Any]]:
     started = time.perf_counter()
     frames, truth = simulate_world_frames(world, job.duration_s)
     sim_s = time.perf_counter() - started
-    seen = np.mean(
-        (truth.mid360_drone_points > 0)
-        | (np.interp(truth.lidar_stamps_ns, truth.avia_stamps_ns, truth.avia_drone_points) > 0)
-    )
     common = {
         "seed": job.seed,
         "kind": world.kind,
@@ -272,10 +268,17 @@ def run_world(job: Job) -> list[dict[str, Any]]:
         "slope": round(world.slope_deg, 2),
         "drone": world.class_id,
         "max_speed": round(float(truth.speeds_mps.max()), 2),
-        "seen": round(float(seen), 3),
+        "seen": seen_fraction(truth),
         "sim_seconds": round(sim_s, 2),
     }
     return _method_rows(job, lambda: iter(frames), truth.gt_stamps_ns, truth.gt_positions, common)
+
+
+def seen_fraction(truth: Any) -> float:
+    """The share of the Mid-360's frames in which the drone returned a point to either LiDAR
+    (the Avia's per-file counts interpolated to the Mid-360's stamps)."""
+    avia = np.interp(truth.lidar_stamps_ns, truth.avia_stamps_ns, truth.avia_drone_points)
+    return round(float(np.mean((truth.mid360_drone_points > 0) | (avia > 0))), 3)
 
 
 def run_probe(job: Job) -> list[dict[str, Any]]:
@@ -302,6 +305,7 @@ def run_probe(job: Job) -> list[dict[str, Any]]:
             "seed": job.seed,
             "probe": job.probe,
             "scenario": job.scenario,
+            "seen": seen_fraction(truth),
             "sim_seconds": round(time.perf_counter() - started, 2),
         }
         return _method_rows(
@@ -461,6 +465,22 @@ def report_probes(rows: list[dict[str, Any]], methods: Sequence[str]) -> None:
                     f"{int((v > FAIL_RMS_M).sum()):>3d}/{len(v):<3d} med {np.median(v):6.3f} m"
                 )
         print(f"  {probe:16s}" + "".join(f" {c:>22s}" for c in cells))
+    # a probe can put the drone out of the sensors' view (3 m higher, a pass below the
+    # Mid-360's lowest beam): say how many, and the failures among the others
+    for probe in (p for p in PROBES if any(r["probe"] == p for r in rows)):
+        mine = [r for r in rows if r["probe"] == probe and r["rms"] is not None]
+        rare = {_key(r) for r in mine if _visibility(r) == VISIBILITY[0]}
+        if not rare:
+            continue
+        others = [r for r in mine if _key(r) not in rare]
+        rest = []
+        for method in methods:
+            v = [r["rms"] for r in others if r["method"] == method]
+            rest.append(f"{method} {sum(x > FAIL_RMS_M for x in v)}/{len(v)}")
+        print(
+            f"  {probe}: {len(rare)} sequence(s) with the drone's points in under {SEEN_FEW:.0%}"
+            f" of frames; failures among the others: {', '.join(rest)}"
+        )
 
 
 def _key(row: dict[str, Any]) -> tuple[Any, ...]:

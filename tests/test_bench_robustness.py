@@ -101,3 +101,24 @@ def test_the_squared_error_is_split_by_where_each_row_lies(bench: ModuleType) ->
     assert split["before"] == pytest.approx(0.0 + 1.0) and split["detected"] == pytest.approx(1.0)
     assert split["after"] == pytest.approx(9.0 + 9.0 + 36.0 + 36.0)
     assert bench.score(est[::-1], stamps, truth)["parts"] == parts  # the order does not matter
+
+
+def test_the_probe_report_counts_failures_apart_where_the_drone_was_rarely_seen(
+    bench: ModuleType, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # three sequences of one probe: one whose drone gave points in 5 % of frames (out of view),
+    # failing; one seen and failing; one seen and passing
+    def row(seed: int, method: str, rms: float, seen: float) -> dict[str, object]:
+        return {"seed": seed, "probe": "mount+3m", "scenario": "hover", "method": method,
+                "rms": rms, "seen": seen}  # fmt: skip
+
+    rows = []
+    for method in ("track", "track-causal"):
+        rows += [row(1, method, 30.0, 0.05), row(2, method, 2.0, 0.8), row(3, method, 0.2, 1.0)]
+    bench.report_probes(rows, ["track", "track-causal"])
+    out = capsys.readouterr().out
+    assert "2/3" in out  # the table counts every sequence
+    assert "mount+3m: 1 sequence(s) with the drone's points in under 10% of frames" in out
+    assert "failures among the others: track 1/2, track-causal 1/2" in out
+    bench.report_probes([r for r in rows if r["seed"] != 1], ["track"])
+    assert "under 10%" not in capsys.readouterr().out  # nothing to set apart: no line
