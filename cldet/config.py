@@ -369,6 +369,15 @@ class TrackingConfig(BaseModel):
         " detection weights after its first) reaches this; before any track has, the estimate"
         " is FALLBACK (0: the first track with a second detection)",
     )
+    causal_keep_lost: bool = Field(
+        default=True,
+        description="causal: when the followed track is lost, its chain's evidence keeps"
+        " competing, as the refinement weighs whole chains: a new track is chosen only if it"
+        " could continue the chain (reachable from the lost track as tracks are linked:"
+        " link_speed, link_max_gap_s) or its evidence exceeds the chain's. A drone that"
+        " stopped and was learned, or went behind something, stays a better hypothesis than"
+        " weak clutter that turns up meanwhile (false: any track reaching causal_confirm)",
+    )
     causal_judge_s: float = Field(
         default=1.0,
         ge=0,

@@ -41,7 +41,12 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    (``_coast_from``): along the line of a straight run that ended it, held for
    ``smoothing.straight_hold_factor`` times as long as the run lasted, as the refinement does;
    else from the track's last state (the tracker predicted it at constant velocity until it
-   ended), the velocity decaying from then. While no track is followed, the line search of
+   ended), the velocity decaying from then. The lost chain's evidence keeps competing
+   (``tracking.causal_keep_lost``, ``_eligible``): a newcomer is chosen only if it could
+   continue the chain (reachable from where it was lost, as the refinement links tracks) or
+   outweighs it; a track that continues a lost chain carries its evidence on (one that takes
+   the followed track's object over carries only the evidence of the chain before that track:
+   the two tracks overlapped on one object). While no track is followed, the line search of
    the refinement (``cldet.core.lines``) runs every ``tracking.causal_line_every_s`` over the
    last ``tracking.causal_line_window_s`` (``_search_lines``): a line seen lately whose
    evidence reaches ``causal_confirm`` is followed along its fit, as a lost straight track is.
@@ -203,6 +208,17 @@ class _Coast:
     sigma_m: float  # the last followed estimate's 1-sigma
 
 
+@dataclass(frozen=True)
+class _Lost:
+    """The causal choice's chain after its last track was lost: its evidence and where the
+    lost track was last seen, against which a newcomer is judged (see ``_eligible``)."""
+
+    score: float  # the chain's evidence when it was lost
+    t_s: float  # the lost track's last detection: its time, s
+    position: NDArray[np.float64]  # (3,) ... its position
+    speed: float  # ... its filtered speed there, m/s
+
+
 @dataclass
 class _Evidence:
     """A candidate track's running evidence for the causal choice."""
@@ -211,6 +227,7 @@ class _Evidence:
     hits: int = 0
     first_t_s: float = 0.0
     last_t_s: float = 0.0
+    first_position: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     both: int = 0  # detections seen by both LiDARs in one cluster
     lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
     upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
@@ -240,6 +257,7 @@ class _Evidence:
             self.weight += weight
         else:
             self.first_t_s = t_s
+            self.first_position = np.array(position, dtype=np.float64)
         self.last_t_s = t_s
         self.hits += 1
         self.both += int(both)
@@ -323,6 +341,11 @@ class TrackEstimator:
         self._weigher = _weigher(model, config.tracking)
         self._learned: dict[int, tuple[int, float]] = {}
         self._choice: int | None = None  # causal: the track followed
+        # causal: the evidence of the tracks followed before it in its chain, the chain's
+        # evidence at the last frame followed, and the chain lost (``tracking.causal_keep_lost``)
+        self._chain_base = 0.0
+        self._chain_score = 0.0
+        self._lost: _Lost | None = None
         # the followed track's filtered state at the last frame it was followed (obs time s,
         # position, velocity), and, once it is lost, where the causal estimate coasts from
         self._state: tuple[float, NDArray[np.float64], NDArray[np.float64]] | None = None
@@ -554,6 +577,8 @@ class TrackEstimator:
         best: int | None = None
         best_key, current_score = (0.0, 0), 0.0
         row = {}
+        if self._choice is not None and not np.any(active.ids == self._choice):
+            self._lose(self._choice)
         table = self._tables[index]
         seen_now = dict(zip(owner.tolist(), table.n_points.tolist(), strict=True))
         hand: dict[int, tuple[float, int]] = {}  # eligible track -> hand-set score, hits
@@ -575,20 +600,25 @@ class TrackEstimator:
                 sc *= self._learned_factor(tid, hits)
             if tid == self._choice:
                 current_score = sc
+            elif not self._eligible(tid, sc):
+                continue
             # ties (young tracks) go to the one seen with more points now: the surer object
             key = (sc, seen_now.get(tid, 0))
             if key > best_key:
                 best, best_key = tid, key
         best_score = best_key[0]
-        if self._choice in row and current_score * _SWITCH_RATIO >= best_score:
+        chain = self._chain_base + current_score  # the followed chain's evidence
+        if self._choice in row and chain * _SWITCH_RATIO >= best_score:
             best = self._choice
         if best is None or best_score <= 0.0 or best_score < tc.causal_confirm:
             best = self._choice if self._choice in row else None
+        inherit: float | None = None  # the evidence a new choice carries on
         if best is not None and best == self._choice:
             best = self._hand_over(best, row, active, index, seen_now)
+            inherit = self._chain_base  # the track that took the followed one's object
         if best is None and self._choice is not None:
             self._coast = self._coast_from(self._choice, index)
-        self._choice = best
+        self._follow(best, best_key[0] if best != self._choice else current_score, inherit)
         if best is None:
             self._search_lines(index)
             return self._hold(stamp_ns, index)
@@ -631,6 +661,56 @@ class TrackEstimator:
         factor = float(self._weigher(features[None, :])[0])
         self._learned[track_id] = (hits, factor)
         return factor
+
+    def _lose(self, track_id: int) -> None:
+        """The followed track has ended: its chain's evidence keeps competing
+        (``tracking.causal_keep_lost``), as the refinement weighs whole chains."""
+        rec = self._tracker.record(track_id)
+        if self.config.tracking.causal_keep_lost and rec is not None:
+            t_s = float(self._times[rec.frames[-1]])
+            self._lost = _Lost(self._chain_score, t_s, rec.positions[-1], float(rec.speed[-1]))
+
+    def _eligible(self, track_id: int, score: float) -> bool:
+        """Whether a track that is not followed may be chosen: always, unless a followed
+        chain was lost; then only a track that could continue it (``_continues``) or one
+        whose evidence exceeds the lost chain's. A drone that stopped to hover, or went behind
+        something, stays the better hypothesis than weak clutter that turns up meanwhile."""
+        lost = self._lost
+        if lost is None or score > lost.score:
+            return True
+        ev = self._evidence[track_id]
+        return self._continues(ev.first_t_s, ev.first_position)
+
+    def _continues(self, t0: float, p0: NDArray[np.float64]) -> bool:
+        """A track first seen at ``t0``, ``p0`` can continue the lost chain: after the lost
+        track's last detection, within ``link_max_gap_s``, and within reach of it at
+        ``link_speed`` (as the refinement links tracks) plus the speed it was lost at (a fast
+        pass reappears farther on)."""
+        lost = self._lost
+        if lost is None:
+            return False
+        tc = self.config.tracking
+        gap = t0 - lost.t_s
+        jump = float(np.linalg.norm(p0 - lost.position))
+        return 0.0 < gap <= tc.link_max_gap_s and jump <= (tc.link_speed + lost.speed) * gap + 1.0
+
+    def _follow(self, track_id: int | None, score: float, inherit: float | None) -> None:
+        """Make ``track_id`` the causal choice (None: none), with its evidence ``score``
+        this frame. A new choice carries on the evidence ``inherit`` where given (it took the
+        followed track's object over), or a lost chain's where it can continue it."""
+        if track_id is None:
+            self._choice = None
+            return
+        if track_id != self._choice:
+            if inherit is None:
+                ev = self._evidence.get(track_id)
+                lost = self._lost
+                continues = ev is not None and self._continues(ev.first_t_s, ev.first_position)
+                inherit = lost.score if lost is not None and continues else 0.0
+            self._chain_base = inherit
+            self._lost = None
+        self._choice = track_id
+        self._chain_score = self._chain_base + score
 
     def _hand_over(
         self,
