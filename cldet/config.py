@@ -372,11 +372,13 @@ class TrackingConfig(BaseModel):
     causal_keep_lost: bool = Field(
         default=True,
         description="causal: when the followed track is lost, its chain's evidence keeps"
-        " competing, as the refinement weighs whole chains: a new track is chosen only if it"
-        " could continue the chain (reachable from the lost track as tracks are linked:"
-        " link_speed, link_max_gap_s) or its evidence exceeds the chain's. A drone that"
-        " stopped and was learned, or went behind something, stays a better hypothesis than"
-        " weak clutter that turns up meanwhile (false: any track reaching causal_confirm)",
+        " competing for link_max_gap_s, as the refinement weighs whole chains: a track that"
+        " could continue the chain (reachable from the lost track's last detection before its"
+        " first at link_speed plus the lost track's speed there) competes with the chain's"
+        " evidence added to its own, any other only once its own exceeds the chain's. A drone"
+        " that stopped and was learned, or went behind something, stays a better hypothesis"
+        " than weak clutter that turns up meanwhile (false: any track reaching"
+        " causal_confirm)",
     )
     causal_judge_s: float = Field(
         default=1.0,

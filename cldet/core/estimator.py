@@ -29,7 +29,7 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
 5. the causal choice: the active track with the highest running evidence (the per-detection
    weights of ``cldet.core.selection``, times its static and speed factors so far, re-weighed
    by the learned scorer as the refinement does: ``_learned_factor``; a challenger
-   must beat the current choice by ``_SWITCH_RATIO``; no track is reported before one has
+   must beat the current choice by ``_SWITCH_RATIO`` (both as chains: see below); no track is reported before one has
    gathered ``tracking.causal_confirm``, and none is chosen before it has lived
    ``tracking.causal_judge_s``, from when on it is judged static or rigidly fixed: for its
    first second a still object, say a sign overhead, looks like a drone that just arrived);
@@ -41,12 +41,12 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    (``_coast_from``): along the line of a straight run that ended it, held for
    ``smoothing.straight_hold_factor`` times as long as the run lasted, as the refinement does;
    else from the track's last state (the tracker predicted it at constant velocity until it
-   ended), the velocity decaying from then. The lost chain's evidence keeps competing
-   (``tracking.causal_keep_lost``, ``_eligible``): a newcomer is chosen only if it could
-   continue the chain (reachable from where it was lost, as the refinement links tracks) or
-   outweighs it; a track that continues a lost chain carries its evidence on (one that takes
-   the followed track's object over carries only the evidence of the chain before that track:
-   the two tracks overlapped on one object). While no track is followed, the line search of
+   ended), the velocity decaying from then. The lost chain's evidence keeps competing for
+   ``link_max_gap_s`` (``tracking.causal_keep_lost``), as the refinement weighs whole chains:
+   a track that could continue it (linked as the refinement links tracks, ``_continues``)
+   competes with the chain's evidence added to its own, any other only once its own exceeds
+   the chain's; a challenger must beat the followed chain's total by ``_SWITCH_RATIO``. While
+   no track is followed, the line search of
    the refinement (``cldet.core.lines``) runs every ``tracking.causal_line_every_s`` over the
    last ``tracking.causal_line_window_s`` (``_search_lines``): a line seen lately whose
    evidence reaches ``causal_confirm`` is followed along its fit, as a lost straight track is.
@@ -210,13 +210,13 @@ class _Coast:
 
 @dataclass(frozen=True)
 class _Lost:
-    """The causal choice's chain after its last track was lost: its evidence and where the
-    lost track was last seen, against which a newcomer is judged (see ``_eligible``)."""
+    """The causal choice's chain after its last track was lost: its evidence and the lost
+    track's detections, against which other tracks are judged (see ``_decide``)."""
 
     score: float  # the chain's evidence when it was lost
-    t_s: float  # the lost track's last detection: its time, s
-    position: NDArray[np.float64]  # (3,) ... its position
-    speed: float  # ... its filtered speed there, m/s
+    times_s: NDArray[np.float64]  # (H,) the lost track's detection times, s
+    positions: NDArray[np.float64]  # (H,3) its detections
+    speed: NDArray[np.float64]  # (H,) its filtered speed after each, m/s
 
 
 @dataclass
@@ -341,11 +341,11 @@ class TrackEstimator:
         self._weigher = _weigher(model, config.tracking)
         self._learned: dict[int, tuple[int, float]] = {}
         self._choice: int | None = None  # causal: the track followed
-        # causal: the evidence of the tracks followed before it in its chain, the chain's
-        # evidence at the last frame followed, and the chain lost (``tracking.causal_keep_lost``)
-        self._chain_base = 0.0
-        self._chain_score = 0.0
+        # causal (``tracking.causal_keep_lost``): the chain lost, the evidence the followed
+        # track carries on from a lost chain it continues, and the followed chain's evidence
         self._lost: _Lost | None = None
+        self._base = 0.0
+        self._value = 0.0
         # the followed track's filtered state at the last frame it was followed (obs time s,
         # position, velocity), and, once it is lost, where the causal estimate coasts from
         self._state: tuple[float, NDArray[np.float64], NDArray[np.float64]] | None = None
@@ -574,14 +574,16 @@ class TrackEstimator:
         """The causal estimate: the active track with the most evidence so far."""
         tc = self.config.tracking
         active = self._tracker.active()
-        best: int | None = None
-        best_key, current_score = (0.0, 0), 0.0
         row = {}
         if self._choice is not None and not np.any(active.ids == self._choice):
             self._lose(self._choice)
+        lost = self._lost
+        if lost is not None and self._times[index] - lost.times_s[-1] > tc.link_max_gap_s:
+            self._lost = lost = None  # nothing can continue it any more
         table = self._tables[index]
         seen_now = dict(zip(owner.tolist(), table.n_points.tolist(), strict=True))
-        hand: dict[int, tuple[float, int]] = {}  # eligible track -> hand-set score, hits
+        # eligible track -> (evidence carried on from the lost chain, hand-set score, hits)
+        hand: dict[int, tuple[float, float, int]] = {}
         for i, tid in enumerate(active.ids.tolist()):
             ev = self._evidence.get(tid)
             if ev is None:
@@ -589,36 +591,57 @@ class TrackEstimator:
             row[tid] = i
             if tid != self._choice and ev.lived < tc.causal_judge_s:
                 continue  # not chosen before it can be judged static or fixed
-            hand[tid] = (ev.score(tc), ev.hits)
-        # the learned factor lies in [floor, 1]: a track whose hand-set score is below floor
-        # times the highest cannot win, and is not scored (the scorer costs a feature vector);
-        # the followed one always is (its score decides whether to switch)
-        floor = self._weigher.floor if self._weigher is not None else 1.0
-        top = max((h for h, _ in hand.values()), default=0.0) * floor
-        for tid, (sc, hits) in hand.items():
-            if sc >= top or tid == self._choice:
-                sc *= self._learned_factor(tid, hits)
+            h = ev.score(tc)
             if tid == self._choice:
-                current_score = sc
-            elif not self._eligible(tid, sc):
+                base = self._base
+            elif lost is not None and self._continues(tid):
+                base = lost.score
+            elif lost is not None and h <= lost.score:
+                continue  # neither continues the lost chain nor can outweigh it
+            else:
+                base = 0.0
+            hand[tid] = (base, h, ev.hits)
+        # the learned factor lies in [floor, 1]: a track whose value (its evidence plus what it
+        # carries on) is below the least that another, surely eligible, keeps once weighed
+        # cannot win, and is not scored (the scorer costs a feature vector); the followed one
+        # always is (its value decides whether to switch)
+        floor = self._weigher.floor if self._weigher is not None else 1.0
+        top = max(
+            (
+                b + floor * h
+                for b, h, _ in hand.values()
+                if lost is None or b > 0.0 or floor * h > lost.score
+            ),
+            default=0.0,
+        )
+        best: int | None = None
+        best_key: tuple[float, int] = (0.0, 0)
+        own: dict[int, float] = {}  # weighed evidence of the tracks scored
+        best_base = 0.0
+        for tid, (base, h, hits) in hand.items():
+            if base + h < top and tid != self._choice:
                 continue
+            sc = own[tid] = h * self._learned_factor(tid, hits)
+            if tid != self._choice and lost is not None and base == 0.0 and sc <= lost.score:
+                continue  # weighed, it no longer outweighs the lost chain
             # ties (young tracks) go to the one seen with more points now: the surer object
-            key = (sc, seen_now.get(tid, 0))
+            key = (base + sc, seen_now.get(tid, 0))
             if key > best_key:
-                best, best_key = tid, key
-        best_score = best_key[0]
-        chain = self._chain_base + current_score  # the followed chain's evidence
-        if self._choice in row and chain * _SWITCH_RATIO >= best_score:
-            best = self._choice
-        if best is None or best_score <= 0.0 or best_score < tc.causal_confirm:
+                best, best_key, best_base = tid, key, base
+        choice = self._choice
+        if choice is not None and choice in row:
+            # the followed chain against the best: what both carry on from one lost chain
+            # cancels (both continue it: their own evidence decides, as in the refinement)
+            common = min(self._base, best_base)
+            if (self._base - common + own[choice]) * _SWITCH_RATIO >= best_key[0] - common:
+                best = choice
+        if best is None or own.get(best, 0.0) <= 0.0 or own[best] < tc.causal_confirm:
             best = self._choice if self._choice in row else None
-        inherit: float | None = None  # the evidence a new choice carries on
         if best is not None and best == self._choice:
             best = self._hand_over(best, row, active, index, seen_now)
-            inherit = self._chain_base  # the track that took the followed one's object
         if best is None and self._choice is not None:
             self._coast = self._coast_from(self._choice, index)
-        self._follow(best, best_key[0] if best != self._choice else current_score, inherit)
+        self._follow(best, own)
         if best is None:
             self._search_lines(index)
             return self._hold(stamp_ns, index)
@@ -667,50 +690,43 @@ class TrackEstimator:
         (``tracking.causal_keep_lost``), as the refinement weighs whole chains."""
         rec = self._tracker.record(track_id)
         if self.config.tracking.causal_keep_lost and rec is not None:
-            t_s = float(self._times[rec.frames[-1]])
-            self._lost = _Lost(self._chain_score, t_s, rec.positions[-1], float(rec.speed[-1]))
+            times = self._times[rec.frames].copy()
+            self._lost = _Lost(self._value, times, rec.positions, rec.speed)
 
-    def _eligible(self, track_id: int, score: float) -> bool:
-        """Whether a track that is not followed may be chosen: always, unless a followed
-        chain was lost; then only a track that could continue it (``_continues``) or one
-        whose evidence exceeds the lost chain's. A drone that stopped to hover, or went behind
-        something, stays the better hypothesis than weak clutter that turns up meanwhile."""
-        lost = self._lost
-        if lost is None or score > lost.score:
-            return True
-        ev = self._evidence[track_id]
-        return self._continues(ev.first_t_s, ev.first_position)
-
-    def _continues(self, t0: float, p0: NDArray[np.float64]) -> bool:
-        """A track first seen at ``t0``, ``p0`` can continue the lost chain: after the lost
-        track's last detection, within ``link_max_gap_s``, and within reach of it at
-        ``link_speed`` (as the refinement links tracks) plus the speed it was lost at (a fast
-        pass reappears farther on)."""
-        lost = self._lost
-        if lost is None:
+    def _continues(self, track_id: int) -> bool:
+        """The track can continue the lost chain, as the refinement links tracks: from the
+        lost track's last detection before the track's first, within ``link_max_gap_s``, the
+        jump is at most (``link_speed`` plus the lost track's speed there) times the gap plus
+        1 m (a fast pass reappears farther on)."""
+        lost, ev = self._lost, self._evidence.get(track_id)
+        if lost is None or ev is None:
+            return False
+        k = int(np.searchsorted(lost.times_s, ev.first_t_s, side="left")) - 1
+        if k < 0:
             return False
         tc = self.config.tracking
-        gap = t0 - lost.t_s
-        jump = float(np.linalg.norm(p0 - lost.position))
-        return 0.0 < gap <= tc.link_max_gap_s and jump <= (tc.link_speed + lost.speed) * gap + 1.0
+        gap = ev.first_t_s - float(lost.times_s[k])
+        jump = float(np.linalg.norm(ev.first_position - lost.positions[k]))
+        reach = (tc.link_speed + float(lost.speed[k])) * gap + 1.0
+        return gap <= tc.link_max_gap_s and jump <= reach
 
-    def _follow(self, track_id: int | None, score: float, inherit: float | None) -> None:
-        """Make ``track_id`` the causal choice (None: none), with its evidence ``score``
-        this frame. A new choice carries on the evidence ``inherit`` where given (it took the
-        followed track's object over), or a lost chain's where it can continue it."""
-        if track_id is None:
-            self._choice = None
-            return
-        if track_id != self._choice:
-            if inherit is None:
-                ev = self._evidence.get(track_id)
-                lost = self._lost
-                continues = ev is not None and self._continues(ev.first_t_s, ev.first_position)
-                inherit = lost.score if lost is not None and continues else 0.0
-            self._chain_base = inherit
-            self._lost = None
+    def _follow(self, track_id: int | None, own: dict[int, float]) -> None:
+        """Make ``track_id`` the causal choice (None: none); ``own``: the weighed evidence of
+        the tracks scored this frame. A track that continues the lost chain carries its
+        evidence on; one that does not has outweighed it: the chain is given up."""
+        if track_id is not None and track_id != self._choice:
+            continues = self._continues(track_id)
+            self._base = self._lost.score if continues and self._lost is not None else 0.0
+            if not continues:
+                self._lost = None
         self._choice = track_id
-        self._chain_score = self._chain_base + score
+        if track_id is None:
+            return
+        sc = own.get(track_id)
+        if sc is None:  # a track that took the followed one's object over (``_hand_over``)
+            ev = self._evidence[track_id]
+            sc = ev.score(self.config.tracking) * self._learned_factor(track_id, ev.hits)
+        self._value = self._base + sc
 
     def _hand_over(
         self,
