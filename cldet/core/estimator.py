@@ -28,9 +28,10 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    (``_protects``);
 5. the causal choice: the active track with the highest running evidence (the per-detection
    weights of ``cldet.core.selection``, times its static and speed factors so far, re-weighed
-   by the learned scorer as the refinement does: ``_learned_factor``; a challenger
-   must beat the current choice by ``_SWITCH_RATIO`` (both as chains: see below); no track is reported before one has
-   gathered ``tracking.causal_confirm``, and none is chosen before it has lived
+   by the learned scorer as the refinement does: ``_learned_factor``; a challenger must
+   beat the current choice by ``_SWITCH_RATIO`` (both as chains: see below); no track is
+   reported before its own evidence reaches ``tracking.causal_confirm``, and none is chosen
+   before it has lived
    ``tracking.causal_judge_s``, from when on it is judged static or rigidly fixed: for its
    first second a still object, say a sign overhead, looks like a drone that just arrived);
    the estimate is that track's filtered state moved back from the points' time to the stamp.
@@ -43,13 +44,17 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    else from the track's last state (the tracker predicted it at constant velocity until it
    ended), the velocity decaying from then. The lost chain's evidence keeps competing for
    ``link_max_gap_s`` (``tracking.causal_keep_lost``), as the refinement weighs whole chains:
-   a track that could continue it (linked as the refinement links tracks, ``_continues``)
-   competes with the chain's evidence added to its own, any other only once its own exceeds
-   the chain's; a challenger must beat the followed chain's total by ``_SWITCH_RATIO``. While
-   no track is followed, the line search of
-   the refinement (``cldet.core.lines``) runs every ``tracking.causal_line_every_s`` over the
-   last ``tracking.causal_line_window_s`` (``_search_lines``): a line seen lately whose
-   evidence reaches ``causal_confirm`` is followed along its fit, as a lost straight track is.
+   a track that could continue it (``_continues``: the refinement's link from the lost
+   track's last detection before the track's first, with the lost track's speed there added
+   to ``link_speed``) competes with the chain's evidence added to its own (counted whole,
+   where the refinement counts a track only up to the next one's start), any other only once
+   its own exceeds the chain's; a challenger must beat the followed chain's total by
+   ``_SWITCH_RATIO``, what two continuations of one chain share cancelling. While no track is
+   followed, the line search of the refinement (``cldet.core.lines``) runs every
+   ``tracking.causal_line_every_s`` over the last ``tracking.causal_line_window_s``
+   (``_search_lines``): a line seen lately whose evidence reaches ``causal_confirm`` is
+   followed along its fit, as a lost straight track is, whatever a lost chain's evidence (a
+   line is a coast, not a chosen track).
    A sparse fast pass, one return in a few scans, never makes a Kalman track to follow.
 
 ``refine``: the candidate tracks plus the constant-velocity lines of sparse fast movers
@@ -688,8 +693,10 @@ class TrackEstimator:
     def _lose(self, track_id: int) -> None:
         """The followed track has ended: its chain's evidence keeps competing
         (``tracking.causal_keep_lost``), as the refinement weighs whole chains."""
+        if not self.config.tracking.causal_keep_lost:
+            return
         rec = self._tracker.record(track_id)
-        if self.config.tracking.causal_keep_lost and rec is not None:
+        if rec is not None:
             times = self._times[rec.frames].copy()
             self._lost = _Lost(self._value, times, rec.positions, rec.speed)
 
@@ -720,8 +727,8 @@ class TrackEstimator:
             if not continues:
                 self._lost = None
         self._choice = track_id
-        if track_id is None:
-            return
+        if track_id is None or not self.config.tracking.causal_keep_lost:
+            return  # the chain's value serves only a lost chain
         sc = own.get(track_id)
         if sc is None:  # a track that took the followed one's object over (``_hand_over``)
             ev = self._evidence[track_id]

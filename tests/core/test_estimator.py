@@ -559,13 +559,17 @@ def test_the_causal_estimate_waits_for_confirmation() -> None:
 
 
 def _lost_drone_causal(
-    seed: int, back: int, clutter: tuple[float, float, float], keep_lost: bool
+    seed: int,
+    back: int,
+    clutter: tuple[float, float, float],
+    keep_lost: bool,
+    tracking: dict[str, object] | None = None,
 ) -> tuple[list[Estimate], np.ndarray]:
     """The causal estimates of a drone crossing 8 m out (dozens of points a scan) in scans 0-29,
     gone (behind something) until scan ``back``, then on along its line, with a small still
-    object at ``clutter`` from scan 40 on (``tracking.causal_keep_lost`` = ``keep_lost``; the
-    hand-set factors alone: the learned prior doubts the still object too). Also the drone's
-    path (70,3)."""
+    object at ``clutter`` from scan 40 on (``tracking.causal_keep_lost`` = ``keep_lost``, and
+    ``tracking`` overrides; the hand-set factors alone: the learned prior doubts the still
+    object too). Also the drone's path (70,3)."""
     path = np.array([[8.0, -3.0 + 0.1 * k, 2.0] for k in range(70)])
 
     def objects(k: int) -> list[tuple[tuple[float, ...], float]]:
@@ -576,9 +580,9 @@ def _lost_drone_causal(
             out.append((clutter, 0.15))
         return out
 
-    tracking = {"causal_keep_lost": keep_lost, "prior_scorer": False}
+    overrides = {"causal_keep_lost": keep_lost, "prior_scorer": False, **(tracking or {})}
     frames = _with_objects(seed, 70, objects)
-    _, result = estimate_sequence(frames, load_config(overrides={"tracking": tracking}))
+    _, result = estimate_sequence(frames, load_config(overrides={"tracking": overrides}))
     assert all(e.source == Source.DETECTED for e in result.causal[15:30])
     return list(result.causal), path
 
@@ -592,12 +596,15 @@ def test_a_lost_drone_stays_the_causal_choice_over_weak_clutter_that_turns_up_la
     # chain's: the refinement keeps the drone's chain, and so does the causal choice
     clutter = (-14.0, 10.0, 3.0)
 
-    def on_clutter(keep_lost: bool) -> int:
-        causal, _ = _lost_drone_causal(seed, 70, clutter, keep_lost)
+    def on_clutter(keep_lost: bool, gap_s: float = 8.0) -> int:
+        tracking = {"link_max_gap_s": gap_s}
+        causal, _ = _lost_drone_causal(seed, 70, clutter, keep_lost, tracking)
         return sum(float(np.linalg.norm(e.position - clutter)) < 1.0 for e in causal)
 
     assert on_clutter(True) == 0
     assert on_clutter(False) >= 10  # the rule is needed here
+    # nothing can continue a chain lost link_max_gap_s ago: it no longer competes
+    assert on_clutter(True, gap_s=1.5) >= 10
 
 
 @pytest.mark.parametrize("seed", [1, 2])
