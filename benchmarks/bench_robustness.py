@@ -37,7 +37,9 @@ sequences with no detection at all (``error_parts``; the rows' ``parts`` in ``--
 and its six ``SCENARIOS``): 18 sequences per probe (3 seeds x 6 scenarios) for a static 0.3 m
 object overhanging the sensor at 67 deg elevation, the sensor tilted 8 deg, tilted 15 deg, the
 mount 3 m higher, and sequences of 1.5 s (plus the unperturbed baseline), and prints the
-failures out of 18 per method. Probe seeds follow the same ranges (default: evaluation).
+failures out of 18 per method; and, for a probe with sequences whose drone returned points in
+under 10 % of frames (a pass below the lowest beam, with the mount 3 m higher), how many, and
+the failures among the others. Probe seeds follow the same ranges (default: evaluation).
 """
 
 from __future__ import annotations
