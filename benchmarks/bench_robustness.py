@@ -452,7 +452,8 @@ def report_probes(rows: list[dict[str, Any]], methods: Sequence[str]) -> None:
     """Failures out of the probe's sequences, per probe and method."""
     print(f"\nprobes on the original simulator: failures (RMS > {FAIL_RMS_M} m) / sequences")
     print(f"  {'probe':16s}" + "".join(f" {m:>22s}" for m in methods))
-    for probe in (p for p in PROBES if any(r["probe"] == p for r in rows)):
+    probes = [p for p in PROBES if any(r["probe"] == p for r in rows)]
+    for probe in probes:
         cells = []
         for method in methods:
             mine = [r for r in rows if r["probe"] == probe and r["method"] == method]
@@ -469,7 +470,7 @@ def report_probes(rows: list[dict[str, Any]], methods: Sequence[str]) -> None:
         print(f"  {probe:16s}" + "".join(f" {c:>22s}" for c in cells))
     # a probe can put the drone out of the sensors' view (3 m higher, a pass below the
     # Mid-360's lowest beam): say how many, and the failures among the others
-    for probe in (p for p in PROBES if any(r["probe"] == p for r in rows)):
+    for probe in probes:
         mine = [r for r in rows if r["probe"] == probe and r["rms"] is not None]
         rare = {_key(r) for r in mine if _visibility(r) == VISIBILITY[0]}
         if not rare:

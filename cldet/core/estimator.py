@@ -105,6 +105,7 @@ from cldet.core.selection import (
     TrackWeigher,
     detection_weights,
     fixed_spread,
+    link_reach,
     sampling_jitter,
     score_tracks,
     select_chain,
@@ -714,7 +715,7 @@ class TrackEstimator:
         tc = self.config.tracking
         gap = ev.first_t_s - float(lost.times_s[k])
         jump = float(np.linalg.norm(ev.first_position - lost.positions[k]))
-        reach = (tc.link_speed + float(lost.speed[k])) * gap + 1.0
+        reach = float(link_reach(gap, tc, float(lost.speed[k])))
         return gap <= tc.link_max_gap_s and jump <= reach
 
     def _follow(self, track_id: int | None, own: dict[int, float]) -> None:

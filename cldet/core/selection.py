@@ -91,6 +91,7 @@ __all__ = [
     "TrackWeigher",
     "detection_weights",
     "fixed_spread",
+    "link_reach",
     "sampling_jitter",
     "score_tracks",
     "select_chain",
@@ -293,6 +294,15 @@ def _hand_factor(
     return factor * (1.0 + 0.5 * float(np.mean(det.both)))
 
 
+def link_reach(
+    gap_s: NDArray[np.float64] | float, cfg: TrackingConfig, speed_mps: float = 0.0
+) -> NDArray[np.float64] | float:
+    """How far a track may start from another's detection ``gap_s`` earlier and still link to
+    it: ``link_speed`` (plus ``speed_mps``, the earlier track's own speed there, where known)
+    times the gap, plus 1 m."""
+    return (cfg.link_speed + speed_mps) * gap_s + 1.0
+
+
 def _link_cut(ta: ScoredTrack, t0: float, p0: NDArray[np.float64], cfg: TrackingConfig) -> int:
     """How many of track ``ta``'s first hits a link to a track starting at time ``t0`` and
     position ``p0`` keeps (0: no link; see the module docstring): all its hits before ``t0``
@@ -306,7 +316,7 @@ def _link_cut(ta: ScoredTrack, t0: float, p0: NDArray[np.float64], cfg: Tracking
         lo = hi - 1
     gap = t0 - ta.times_s[lo:hi]
     jump = np.linalg.norm(ta.positions[lo:hi] - p0, axis=1)
-    ok = np.flatnonzero(jump <= cfg.link_speed * gap + 1.0)
+    ok = np.flatnonzero(jump <= link_reach(gap, cfg))
     if not len(ok):
         return 0
     cut = lo + int(ok[-1]) + 1
