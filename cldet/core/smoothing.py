@@ -200,8 +200,8 @@ def straight_run(
     t: NDArray[np.float64],
     z: NDArray[np.float64],
     max_rms_m: float,
-    scan_s: float = 0.0,
-    min_points: int = 4,
+    scan_s: float,
+    min_points: int,
 ) -> StraightRun | None:
     """The longest suffix of detections ``z`` (H,3) at times ``t`` (H,), increasing, whose
     least-squares constant-velocity fit leaves an RMS residual (3D, per detection) of at most

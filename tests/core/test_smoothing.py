@@ -5,7 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cldet.config import SmoothingConfig
 from cldet.core.smoothing import KalmanCV, extrapolate, rts_smooth, straight_run
+
+_MIN_POINTS = SmoothingConfig().straight_min_points  # the configuration's default
 
 
 def _trajectory(t: np.ndarray) -> np.ndarray:
@@ -94,13 +97,13 @@ def test_straight_run_starts_where_the_flight_turned() -> None:
     direction = exit_v / np.linalg.norm(exit_v)
     straight = exit_p + np.outer(t - t[19], 12.0 * direction)
     z = np.where((t < t[19] + 1e-9)[:, None], turn, straight) + rng.normal(0, 0.15, (len(t), 3))
-    run = straight_run(t, z, max_rms_m=0.4)
+    run = straight_run(t, z, 0.4, 0.0, _MIN_POINTS)
     assert run is not None
     assert run.duration_s == pytest.approx(t[-1] - t[19], abs=0.35)  # begins at the turn
     np.testing.assert_allclose(run.velocity, 12.0 * direction, atol=0.3)
     # a random walk of the same scale is never straight for long
     walk = np.cumsum(rng.normal(0, 1.0, (len(t), 3)), axis=0)
-    walk_run = straight_run(t, walk, max_rms_m=0.4)
+    walk_run = straight_run(t, walk, 0.4, 0.0, _MIN_POINTS)
     assert walk_run is None or walk_run.duration_s < 1.0
 
 
@@ -111,9 +114,9 @@ def test_straight_run_allows_for_the_smear_of_a_scan() -> None:
     t = np.arange(0.0, 3.0, 0.1)
     v = np.array([20.0, 0.0, 0.0])
     z = np.outer(t, v) + np.outer(rng.uniform(-1.0, 1.0, len(t)), v / 20.0)
-    no_smear = straight_run(t, z, max_rms_m=0.3)
+    no_smear = straight_run(t, z, 0.3, 0.0, _MIN_POINTS)
     assert no_smear is None or no_smear.duration_s < 1.0
-    run = straight_run(t, z, max_rms_m=0.3, scan_s=0.1)
+    run = straight_run(t, z, 0.3, 0.1, _MIN_POINTS)
     assert run is not None and run.duration_s == pytest.approx(t[-1])
     # where the run ends: the fitted line at the last detection's time lies far nearer the
     # path than the last (smeared) detection does, so extrapolation starts from the line
