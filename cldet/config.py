@@ -338,6 +338,24 @@ class TrackingConfig(BaseModel):
         default=8.0, gt=0, description="longest unseen gap bridged between tracks"
     )
     link_speed: float = Field(default=10.0, gt=0, description="max mean speed across a bridged gap")
+    extend_gap_s: float = Field(
+        default=0.5,
+        ge=0,
+        description="refinement: the chosen chain is carried on, before its first detection and"
+        " after its last, by any track that touches it (its nearest detection at most this"
+        " long before or after, within link_speed's reach), however weak: the chain's evidence"
+        " says which object is the drone, and a track continuous with it is where that object"
+        " was meanwhile (a hover judged static at the start, say), which beats extrapolating"
+        " (0: off)",
+    )
+    extend_min_evidence: float = Field(
+        default=0.5,
+        ge=0,
+        description="... a track carrying it on must bring at least this much evidence (summed"
+        " detection weights of the part taken; one full-weight detection is 1): a drone"
+        " hovering for a second, judged static, brings ~0.5, while two or three near-weightless"
+        " returns that clutter makes by chance next to anything bring ~0.1",
+    )
     link_tail_ratio: float = Field(
         default=0.25,
         ge=0,

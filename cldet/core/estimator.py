@@ -60,7 +60,8 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
 ``refine``: the candidate tracks plus the constant-velocity lines of sparse fast movers
 (``cldet.core.lines``, track-before-detect); the drone's chain of tracks chosen by
 whole-sequence evidence (``cldet.core.selection``: hand-set factors re-weighed by the
-packaged prior of ``cldet.core.prior`` and by a model's own scorer where one is given); a
+packaged prior of ``cldet.core.prior`` and by a model's own scorer where one is given), carried
+on at its ends by weak tracks that touch it (``selection.extend_chain``); a
 forward-backward RTS smoother (``cldet.core.smoothing``) fills
 the gaps; before the first and after the last detection the track's own motion is
 extrapolated, its velocity decaying with time constant ``extrapolation_tau_s``, or held still
@@ -104,6 +105,7 @@ from cldet.core.selection import (
     TrackScorer,
     TrackWeigher,
     detection_weights,
+    extend_chain,
     fixed_spread,
     link_reach,
     sampling_jitter,
@@ -913,7 +915,7 @@ def refine_candidates(
     stamps, t_s = cand.stamps_ns, cand.times_s
     tc = cfg.tracking
     scored = score_tracks(cand.records, cand.tables, t_s, tc, _weigher(model, tc))
-    chain = select_chain(scored, tc)
+    chain = extend_chain(select_chain(scored, tc), scored, tc)
     if not chain:
         pos = np.asarray(tc.fallback_position, dtype=np.float64)
         est = tuple(Estimate(int(s), pos.copy(), Source.FALLBACK, 0, 1e3) for s in stamps)

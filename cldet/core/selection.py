@@ -66,6 +66,13 @@ detection from which the jump is possible, dropping the rest, but only when the 
 is weak (its returns per detection average at most ``link_tail_ratio`` of the kept part's). A
 steady track of something else keeps its returns to the end and cannot be cut to feed a drone
 track. This is a dynamic programme over tracks sorted by start.
+
+The chosen chain is then carried on at both ends (``extend_chain``) by tracks too weak to be
+worth a link that touch it: a detection at most ``extend_gap_s`` (0.5 s) before its first or
+after its last, within the link's reach, bringing at least ``extend_min_evidence`` (half a
+full-weight detection). The evidence has said which object is the drone; a drone that hovered
+before flying off was judged static, and its track, worth less than a link, is still where that
+object was: better than extrapolating the chain's motion back through it.
 """
 
 from __future__ import annotations
@@ -93,6 +100,7 @@ __all__ = [
     "fixed_spread",
     "link_reach",
     "sampling_jitter",
+    "extend_chain",
     "score_tracks",
     "select_chain",
 ]
@@ -373,3 +381,62 @@ def select_chain(
         b = int(parent[b])
     chain.reverse()
     return chain
+
+
+def extend_chain(
+    chain: list[tuple[ScoredTrack, int, int]], tracks: list[ScoredTrack], cfg: TrackingConfig
+) -> list[tuple[ScoredTrack, int, int]]:
+    """The chain carried on at both ends by tracks that touch it (``extend_gap_s``).
+
+    The chain is chosen by evidence; a track too weak to be worth a link (a drone hovering at
+    the start is judged static, its detections weigh little) may still be where the chosen
+    object was before the chain begins or after it ends. Before the chain's first detection:
+    the track, other than the chain's, whose detections before it end at most ``extend_gap_s``
+    earlier within ``link_reach`` of it (the refinement's link, ``_link_cut``), its hits up to
+    then prepended; after the last: the track whose first detection after it comes at most
+    ``extend_gap_s`` later within reach, its hits from then appended. Among several, the one
+    with the most evidence in the part taken, at least ``extend_min_evidence`` (near-weightless
+    returns that clutter makes by chance next to anything do not count); repeated while one is
+    found."""
+    if not chain or cfg.extend_gap_s <= 0:
+        return chain
+    near = cfg.model_copy(update={"link_max_gap_s": cfg.extend_gap_s})
+    floor = max(cfg.extend_min_evidence, 1e-9)
+    out = list(chain)
+    used = {id(tr) for tr, _, _ in out}
+    while True:  # before the first detection
+        tr0, i0, _ = out[0]
+        t0, p0 = float(tr0.times_s[i0]), tr0.positions[i0]
+        best: tuple[float, ScoredTrack, int] | None = None
+        for tr in tracks:
+            if id(tr) in used or tr.times_s[0] >= t0:
+                continue
+            cut = _link_cut(tr, t0, p0, near)
+            value = float(np.sum(tr.contribution[:cut]))
+            if cut >= MIN_TRACK_HITS and value >= floor and (best is None or value > best[0]):
+                best = (value, tr, cut)
+        if best is None:
+            break
+        out.insert(0, (best[1], 0, best[2]))
+        used.add(id(best[1]))
+    while True:  # after the last detection
+        tr1, _, i1 = out[-1]
+        t1, p1 = float(tr1.times_s[i1 - 1]), tr1.positions[i1 - 1]
+        best = None
+        for tr in tracks:
+            if id(tr) in used or tr.times_s[-1] <= t1:
+                continue
+            j = int(np.searchsorted(tr.times_s, t1, side="right"))
+            gap = float(tr.times_s[j] - t1)
+            if len(tr.times_s) - j < MIN_TRACK_HITS or gap > cfg.extend_gap_s:
+                continue
+            if float(np.linalg.norm(tr.positions[j] - p1)) > link_reach(gap, cfg):
+                continue
+            value = float(np.sum(tr.contribution[j:]))
+            if value >= floor and (best is None or value > best[0]):
+                best = (value, tr, j)
+        if best is None:
+            break
+        out.append((best[1], best[2], len(best[1].times_s)))
+        used.add(id(best[1]))
+    return out

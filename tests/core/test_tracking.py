@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from cldet.config import TrackingConfig
-from cldet.core.selection import ScoredTrack, score_tracks, select_chain
+from cldet.core.selection import ScoredTrack, extend_chain, score_tracks, select_chain
 from cldet.core.tracking import CandidateTracker, ClusterTable, TrackRecord, crowding
 
 GROUND = -1.5
@@ -243,3 +245,41 @@ def test_a_link_drops_a_tail_of_single_returns_that_strayed_but_not_a_steady_tra
     a, b = _lost_then_found(tail_points=1)
     off = TrackingConfig(link_tail_ratio=0.0)
     assert [tr.record.track_id for tr, _, _ in select_chain([a, b], off)] == [1]
+
+
+def _weak(tr: ScoredTrack, weight: float) -> ScoredTrack:
+    """The track with each detection weighing ``weight`` (judged static, say)."""
+    contribution = np.full(len(tr.times_s), weight)
+    return replace(tr, contribution=contribution, score=float(contribution.sum()))
+
+
+def test_the_chain_is_carried_on_by_weak_tracks_that_touch_it_and_by_nothing_else() -> None:
+    cfg = TrackingConfig()
+    t = np.arange(20) * 0.1
+    still = np.tile([5.0, 0.0, 3.0], (20, 1))
+    # the drone hovers for 2 s (judged static: its detections weigh little), then flies off
+    hover = _weak(_scored(1, t, still, np.full(20, 20)), 0.05)
+    t_fly = 2.1 + np.arange(40) * 0.1
+    fly = _scored(2, t_fly, still[0] + np.outer(t_fly - 2.0, [2.0, 0.0, 0.0]), np.full(40, 20))
+    # something else meanwhile, 10 m away: more evidence than the hover, out of reach
+    other = _weak(_scored(3, t, still + [10.0, 0.0, 0.0], np.full(20, 20)), 0.5)
+    # after the flight: a weak track where it ended, 0.3 s later; one that starts too late
+    end = fly.positions[-1]
+    t_on = fly.times_s[-1] + 0.3 + np.arange(10) * 0.1
+    on = _weak(_scored(4, t_on, np.tile(end, (10, 1)), np.full(10, 20)), 0.1)
+    # right after that, three near-weightless returns (what clutter makes by chance)
+    speck = _weak(
+        _scored(6, t_on[-1] + 0.1 + np.arange(3) * 0.1, np.tile(end, (3, 1)), np.ones(3)), 0.03
+    )
+    late = _weak(_scored(5, t_on + 2.0, np.tile(end, (10, 1)), np.full(10, 20)), 0.05)
+    tracks = [hover, fly, other, on, late, speck]
+    chain = select_chain(tracks, cfg)
+    assert [tr.record.track_id for tr, _, _ in chain] == [2]  # too weak to be worth a link
+    extended = [(tr.record.track_id, i0, i1) for tr, i0, i1 in extend_chain(chain, tracks, cfg)]
+    assert extended == [(1, 0, 20), (2, 0, 40), (4, 0, 10)]
+    # switched off, the chain stays as chosen
+    off = TrackingConfig(extend_gap_s=0.0)
+    assert [tr.record.track_id for tr, _, _ in extend_chain(chain, tracks, off)] == [2]
+    # without the evidence floor the specks carry it on too
+    bare = TrackingConfig(extend_min_evidence=0.0)
+    assert [tr.record.track_id for tr, _, _ in extend_chain(chain, tracks, bare)] == [1, 2, 4, 6]
