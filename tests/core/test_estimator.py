@@ -8,6 +8,7 @@ default (zero) bias correction, so they include the LiDAR's near-face bias (~0.2
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -564,26 +565,35 @@ def _lost_drone_causal(
     clutter: tuple[float, float, float],
     keep_lost: bool,
     tracking: dict[str, object] | None = None,
+    *,
+    seen: Callable[[int], bool] | None = None,
+    n: int = 70,
+    clutter_from: int = 40,
+    clutter_mps: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> tuple[list[Estimate], np.ndarray]:
-    """The causal estimates of a drone crossing 8 m out (dozens of points a scan) in scans 0-29,
-    gone (behind something) until scan ``back``, then on along its line, with a small still
-    object at ``clutter`` from scan 40 on (``tracking.causal_keep_lost`` = ``keep_lost``, and
-    ``tracking`` overrides; the hand-set factors alone: the learned prior doubts the still
-    object too). Also the drone's path (70,3)."""
-    path = np.array([[8.0, -3.0 + 0.1 * k, 2.0] for k in range(70)])
+    """The causal estimates of a drone crossing 8 m out (dozens of points a scan) at 1 m/s in
+    scans 0-29, gone (behind something) until scan ``back``, then on along its line (or seen
+    in the scans ``seen`` picks, of ``n``), with a small still object at ``clutter`` from scan
+    ``clutter_from`` on (``tracking.causal_keep_lost`` = ``keep_lost``, and ``tracking``
+    overrides; the hand-set factors alone: the learned prior doubts the still object too).
+    Also the drone's path (n,3)."""
+    path = np.array([[8.0, -3.0 + 0.1 * k, 2.0] for k in range(n)])
+    shown = seen if seen is not None else (lambda k: k < 30 or k >= back)
 
     def objects(k: int) -> list[tuple[tuple[float, ...], float]]:
         out: list[tuple[tuple[float, ...], float]] = []
-        if k < 30 or k >= back:
+        if shown(k):
             out.append((tuple(path[k]), 0.25))
-        if k >= 40:
-            out.append((clutter, 0.15))
+        if k >= clutter_from:
+            moved = 0.1 * (k - clutter_from) * np.asarray(clutter_mps)
+            out.append((tuple(np.asarray(clutter) + moved), 0.15))
         return out
 
     overrides = {"causal_keep_lost": keep_lost, "prior_scorer": False, **(tracking or {})}
-    frames = _with_objects(seed, 70, objects)
+    frames = _with_objects(seed, n, objects)
     _, result = estimate_sequence(frames, load_config(overrides={"tracking": overrides}))
-    assert all(e.source == Source.DETECTED for e in result.causal[15:30])
+    seen_late = [k for k in range(15, n) if shown(k) and shown(k - 15)]
+    assert all(result.causal[k].source == Source.DETECTED for k in seen_late[:10])
     return list(result.causal), path
 
 
@@ -632,6 +642,28 @@ def test_a_drone_back_within_reach_continues_its_lost_chain(
     monkeypatch.setattr("cldet.core.estimator.TrackEstimator._continues", lambda *_: False)
     later = first_on_drone()
     assert later is None or later >= first + 8
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_chain_lost_twice_keeps_the_evidence_of_both_its_tracks(seed: int) -> None:
+    # the drone is seen for 3 s, hidden for 1.5 s, seen again for 1.5 s (its new track
+    # continues the chain), then hidden for good; 0.5 s later a small object turns up 25 m
+    # away, beyond any link, moving at 1 m/s as steadily as a drone. In the 6.5 s left it
+    # outweighs the second track alone, not the two: the lost chain's evidence adds up
+    start, velocity = np.array([-14.0, 10.0, 3.0]), (0.0, 1.0, 0.0)
+
+    def on_other(seen: Callable[[int], bool]) -> int:
+        causal, _ = _lost_drone_causal(
+            seed, 0, tuple(start), True, seen=seen, n=130, clutter_from=65, clutter_mps=velocity
+        )
+        other = [start + 0.1 * (k - 65) * np.asarray(velocity) for k in range(130)]
+        return sum(
+            float(np.linalg.norm(e.position - o)) < 1.0 for e, o in zip(causal, other, strict=True)
+        )
+
+    assert on_other(lambda k: k < 30 or 45 <= k < 60) == 0
+    # without the first three seconds the lost chain is the second track alone
+    assert on_other(lambda k: 45 <= k < 60) >= 10
 
 
 def _crossing(seed: int, n: int, first: int, last: int) -> tuple[list[LidarFrame], np.ndarray]:
