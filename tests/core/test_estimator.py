@@ -666,6 +666,30 @@ def test_a_chain_lost_twice_keeps_the_evidence_of_both_its_tracks(seed: int) -> 
     assert on_other(lambda k: 45 <= k < 60) >= 10
 
 
+@pytest.mark.parametrize("seed", [1, 2])
+def test_two_continuations_of_a_lost_chain_are_weighed_by_their_own_evidence(seed: int) -> None:
+    # the drone is lost at scan 30; 0.6 s later a small object turns up 2.8 m from where it was
+    # last seen, drifting at 0.3 m/s (within a link's reach: it could continue the chain), and
+    # is followed; the drone is back at scan 45 on its line, a continuation too. What both
+    # carry on from the lost chain cancels, so the drone's own evidence wins it back (counting
+    # the chain for both, the 1.3 switch ratio applied to it too, it never would)
+    start, velocity = np.array([6.0, -2.0, 0.5]), np.array([0.0, -0.3, 0.0])
+    causal, path = _lost_drone_causal(
+        seed, 45, tuple(start), True, n=110, clutter_from=36, clutter_mps=tuple(velocity)
+    )
+    other = [start + 0.1 * (k - 36) * velocity for k in range(110)]
+    on_other = [k for k in range(36, 110) if np.linalg.norm(causal[k].position - other[k]) < 0.7]
+    on_drone = [
+        k
+        for k in range(45, 110)
+        if causal[k].source == Source.DETECTED
+        and float(np.linalg.norm(causal[k].position - path[k])) < 0.5
+    ]
+    assert len(on_other) >= 10  # followed first
+    assert on_drone and on_drone[0] <= 75
+    assert on_drone == list(range(on_drone[0], 110))  # once back, kept
+
+
 def _crossing(seed: int, n: int, first: int, last: int) -> tuple[list[LidarFrame], np.ndarray]:
     """``n`` scans (10 Hz) of a drone crossing at 15 m/s, 15 m out at its closest, returning
     points in scans ``first``-``last`` only: (frames, its true position per scan (n,3))."""
