@@ -97,10 +97,10 @@ __all__ = [
     "TrackScorer",
     "TrackWeigher",
     "detection_weights",
+    "extend_chain",
     "fixed_spread",
     "link_reach",
     "sampling_jitter",
-    "extend_chain",
     "score_tracks",
     "select_chain",
 ]
@@ -392,12 +392,13 @@ def extend_chain(
     the start is judged static, its detections weigh little) may still be where the chosen
     object was before the chain begins or after it ends. Before the chain's first detection:
     the track, other than the chain's, whose detections before it end at most ``extend_gap_s``
-    earlier within ``link_reach`` of it (the refinement's link, ``_link_cut``), its hits up to
-    then prepended; after the last: the track whose first detection after it comes at most
-    ``extend_gap_s`` later within reach, its hits from then appended. Among several, the one
-    with the most evidence in the part taken, at least ``extend_min_evidence`` (near-weightless
-    returns that clutter makes by chance next to anything do not count); repeated while one is
-    found."""
+    earlier within ``link_reach`` of it, its hits up to then prepended; after the last: the
+    track whose first detection after it comes at most ``extend_gap_s`` later within reach of
+    the chain's last detection, its hits from then appended. Both are the refinement's link
+    (``_link_cut`` with ``link_max_gap_s`` set to ``extend_gap_s``). Among several, the one with
+    the most evidence in the part taken, some and at least ``extend_min_evidence``
+    (near-weightless returns that clutter makes by chance next to anything do not count);
+    repeated while one is found."""
     if not chain or cfg.extend_gap_s <= 0:
         return chain
     near = cfg.model_copy(update={"link_max_gap_s": cfg.extend_gap_s})
@@ -420,17 +421,17 @@ def extend_chain(
         out.insert(0, (best[1], 0, best[2]))
         used.add(id(best[1]))
     while True:  # after the last detection
-        tr1, _, i1 = out[-1]
-        t1, p1 = float(tr1.times_s[i1 - 1]), tr1.positions[i1 - 1]
+        tr1, _, i1 = out[-1]  # the chain's last track, to its end
+        t1 = float(tr1.times_s[i1 - 1])
         best = None
         for tr in tracks:
             if id(tr) in used or tr.times_s[-1] <= t1:
                 continue
             j = int(np.searchsorted(tr.times_s, t1, side="right"))
-            gap = float(tr.times_s[j] - t1)
-            if len(tr.times_s) - j < MIN_TRACK_HITS or gap > cfg.extend_gap_s:
+            if len(tr.times_s) - j < MIN_TRACK_HITS:
                 continue
-            if float(np.linalg.norm(tr.positions[j] - p1)) > link_reach(gap, cfg):
+            # linked from the chain's last detection itself (no tail of it dropped)
+            if _link_cut(tr1, float(tr.times_s[j]), tr.positions[j], near) != i1:
                 continue
             value = float(np.sum(tr.contribution[j:]))
             if value >= floor and (best is None or value > best[0]):
