@@ -193,6 +193,12 @@ class BackgroundConfig(BaseModel):
         " small body from a larger thing lit in different places each scan (0: every hover"
         " within a drone's size protected, no young jumps)",
     )
+    protect_hold: bool = Field(
+        default=True,
+        description="a track once protected stays protected while it lives: a hovering drone"
+        " that merges in some frames with foreground beside it (a cluster wider than a drone)"
+        " is not learned in those frames",
+    )
 
 
 class ClusteringConfig(BaseModel):

@@ -25,7 +25,7 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    half-second mean lies ``background.protect_min_moved_m`` from its first value, or while
    their clusters are dense (``background.protect_dense_points``) and either their
    detections lie within a drone's size or the track is too young for a running mean
-   (``_protects``);
+   (``_protects``); and from then on while the track lives (``background.protect_hold``);
 5. the causal choice: the active track with the highest running evidence (the per-detection
    weights of ``cldet.core.selection``, times its static and speed factors so far, re-weighed
    by the learned scorer as the refinement does: ``_learned_factor``; a challenger must
@@ -251,6 +251,7 @@ class _Evidence:
     first_mean: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     displaced: float = 0.0  # from the first running mean to the latest, metres
     jitter_sum: float = 0.0  # summed sampling jitter of the detections (selection.sampling_jitter)
+    protected: bool = False  # protected from the background once (``background.protect_hold``)
 
     def add(
         self,
@@ -537,19 +538,32 @@ class TrackEstimator:
         young for a running mean (one compact object that jumped, say after being hidden).
         Sparse returns cannot tell a small body from a larger thing lit in different places
         each scan (a far hedge, a pole, a swaying edge): their centroids scatter within a
-        drone's size for a while, and wider while their mean stays; such tracks are learned."""
+        drone's size for a while, and wider while their mean stays; such tracks are learned.
+
+        With ``background.protect_hold`` a track once protected stays so while it lives: a
+        drone hovering beside a wall or foliage merges now and then with foreground fringe
+        beside it into a cluster wider than a drone, which is no confirmed mover in that frame;
+        its points in those frames were learned, and a hover learned in three bins (the
+        recurring-range rule) is lost."""
+        ev = self._evidence.get(track_id)
+        bc = self.config.background
+        if bc.protect_hold and ev is not None and ev.protected:
+            return True
         tracker = self._tracker
         if not tracker.is_confirmed_mover(track_id):
             return False
-        bc = self.config.background
-        ev = self._evidence.get(track_id)
         if ev is not None and ev.means and ev.displaced >= bc.protect_min_moved_m:
-            return True
-        dense = bc.protect_dense_points
-        young = ev is None or ev.means == 0
-        if tracker.spread(track_id) > self.config.tracking.max_size_m and (dense == 0 or not young):
-            return False  # scattered wider than a drone, and not a young dense track
-        return dense == 0 or tracker.median_points(track_id) >= dense
+            protected = True
+        else:
+            dense = bc.protect_dense_points
+            young = ev is None or ev.means == 0
+            spread = tracker.spread(track_id) > self.config.tracking.max_size_m
+            if spread and (dense == 0 or not young):
+                return False  # scattered wider than a drone, and not a young dense track
+            protected = dense == 0 or tracker.median_points(track_id) >= dense
+        if ev is not None:
+            ev.protected = protected
+        return protected
 
     def _reclaim(self, pts: NDArray[np.float32], labels: NDArray[np.uint8]) -> None:
         """Points background only through dilation (MARGIN) near a protected mover's last place
