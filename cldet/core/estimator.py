@@ -546,24 +546,27 @@ class TrackEstimator:
         its points in those frames were learned, and a hover learned in three bins (the
         recurring-range rule) is lost."""
         ev = self._evidence.get(track_id)
-        bc = self.config.background
-        if bc.protect_hold and ev is not None and ev.protected:
+        if self.config.background.protect_hold and ev is not None and ev.protected:
             return True
+        protected = self._protects_now(track_id)
+        if protected and ev is not None:
+            ev.protected = True
+        return protected
+
+    def _protects_now(self, track_id: int) -> bool:
+        """``_protects`` judged on this frame alone (without ``background.protect_hold``)."""
         tracker = self._tracker
         if not tracker.is_confirmed_mover(track_id):
             return False
+        bc = self.config.background
+        ev = self._evidence.get(track_id)
         if ev is not None and ev.means and ev.displaced >= bc.protect_min_moved_m:
-            protected = True
-        else:
-            dense = bc.protect_dense_points
-            young = ev is None or ev.means == 0
-            spread = tracker.spread(track_id) > self.config.tracking.max_size_m
-            if spread and (dense == 0 or not young):
-                return False  # scattered wider than a drone, and not a young dense track
-            protected = dense == 0 or tracker.median_points(track_id) >= dense
-        if ev is not None:
-            ev.protected = protected
-        return protected
+            return True
+        dense = bc.protect_dense_points
+        young = ev is None or ev.means == 0
+        if tracker.spread(track_id) > self.config.tracking.max_size_m and (dense == 0 or not young):
+            return False  # scattered wider than a drone, and not a young dense track
+        return dense == 0 or tracker.median_points(track_id) >= dense
 
     def _reclaim(self, pts: NDArray[np.float32], labels: NDArray[np.uint8]) -> None:
         """Points background only through dilation (MARGIN) near a protected mover's last place
