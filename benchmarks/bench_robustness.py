@@ -502,6 +502,15 @@ def _write_json(path: Path, rows: list[dict[str, Any]]) -> None:
     tmp.replace(path)
 
 
+def _import_worker_code() -> None:
+    """Import what the workers run before they fork: a worker replaced after
+    ``maxtasksperchild`` sequences then runs the code this run started with, not whatever is on
+    disk by then (an edit during a long run would otherwise mix two versions in one table)."""
+    import cldet.core.frames  # noqa: F401
+    import cldet.core.methods  # noqa: F401
+    import converters.mmaud  # noqa: F401
+
+
 def main(argv: list[str] | None = None) -> None:
     """Parse the options, run the sequences on the workers, print the tables."""
     parser = argparse.ArgumentParser(
@@ -602,6 +611,7 @@ def main(argv: list[str] | None = None) -> None:
     started = time.perf_counter()
     pool = None
     if args.workers > 1:
+        _import_worker_code()
         pool = multiprocessing.get_context("fork").Pool(args.workers, maxtasksperchild=50)
         results: Iterable[list[dict[str, Any]]] = pool.imap_unordered(_run, jobs)
     else:

@@ -98,6 +98,11 @@ def main(argv: list[str] | None = None) -> int:
     cache.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     jobs = [(s, args.duration, cache) for s in seeds]
+    # the workers' code imported before they fork: a worker replaced after maxtasksperchild
+    # worlds runs the code this run started with, not whatever is on disk by then
+    import cldet.core.estimator  # noqa: F401
+    import cldet.train  # noqa: F401
+
     with multiprocessing.get_context("fork").Pool(args.workers, maxtasksperchild=50) as pool:
         for k, (seed, seconds) in enumerate(pool.imap_unordered(_collect, jobs), 1):
             print(f"[{k}/{len(jobs)}] world {seed}: {seconds:.1f} s", file=sys.stderr)
