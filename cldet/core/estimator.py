@@ -840,9 +840,7 @@ class TrackEstimator:
         self._line_t = t_now
         times = self._times[: index + 1]
         i0 = int(np.searchsorted(times, t_now - tc.causal_line_window_s, side="left"))
-        lines = find_lines(
-            self._tables[i0 : index + 1], times[i0:], tc, -1, self._offset_s, t_now - tc.line_seed_s
-        )
+        lines = find_lines(self._tables[i0 : index + 1], times[i0:], tc, -1, self._offset_s)
         if not lines:
             return
         lines = [replace(rec, frames=rec.frames + i0) for rec in lines]
