@@ -27,8 +27,7 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    detections lie within a drone's size or the track is too young for a running mean
    (``_protects``); and from then on while the track lives (``background.protect_hold``);
 5. the causal choice: the active track with the highest running evidence (the per-detection
-   weights of ``cldet.core.selection``, times its fixed or static factor judged on its
-   detections so far as the refinement judges a whole track (``_judge``), re-weighed
+   weights of ``cldet.core.selection``, times its static and speed factors so far, re-weighed
    by the learned scorer as the refinement does: ``_learned_factor``; a challenger must
    beat the current choice by ``_SWITCH_RATIO`` (both as chains: see below); no track is
    reported before its own evidence reaches ``tracking.causal_confirm``, and none is chosen
@@ -107,11 +106,11 @@ from cldet.core.selection import (
     TrackWeigher,
     detection_weights,
     extend_chain,
+    fixed_spread,
     link_reach,
     sampling_jitter,
     score_tracks,
     select_chain,
-    still_factor,
 )
 from cldet.core.smoothing import extrapolate, rts_smooth, straight_run
 from cldet.core.tracking import (
@@ -238,14 +237,17 @@ class _Evidence:
     last_t_s: float = 0.0
     first_position: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     both: int = 0  # detections seen by both LiDARs in one cluster
-    # the fixed or static factor (``selection.still_factor``) and the hits it was judged at
-    still: float = 1.0
-    still_hits: int = 0
+    lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
+    upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
+    moved: float = 0.0  # largest edge of the box around its detections, metres
     recent: deque[NDArray[np.float64]] = field(
         default_factory=lambda: deque(maxlen=FIXED_MEAN_HITS)
     )
     recent_sum: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
-    means: int = 0  # running means of FIXED_MEAN_HITS detections so far
+    mean_lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
+    mean_upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
+    means: int = 0  # running means of FIXED_MEAN_HITS detections taken into the box
+    mean_moved: float = 0.0  # largest edge of the box around those means, metres
     first_mean: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     displaced: float = 0.0  # from the first running mean to the latest, metres
     jitter_sum: float = 0.0  # summed sampling jitter of the detections (selection.sampling_jitter)
@@ -268,12 +270,18 @@ class _Evidence:
         self.last_t_s = t_s
         self.hits += 1
         self.both += int(both)
+        np.minimum(self.lower, position, out=self.lower)
+        np.maximum(self.upper, position, out=self.upper)
+        self.moved = float(np.max(self.upper - self.lower))
         if len(self.recent) == FIXED_MEAN_HITS:
             self.recent_sum -= self.recent[0]
         self.recent.append(position)
         self.recent_sum += position
         if len(self.recent) == FIXED_MEAN_HITS:
             mean = self.recent_sum / FIXED_MEAN_HITS
+            np.minimum(self.mean_lower, mean, out=self.mean_lower)
+            np.maximum(self.mean_upper, mean, out=self.mean_upper)
+            self.mean_moved = float(np.max(self.mean_upper - self.mean_lower))
             if self.means == 0:
                 self.first_mean = mean
             self.displaced = float(np.linalg.norm(mean - self.first_mean))
@@ -284,10 +292,25 @@ class _Evidence:
         """Seconds from the first detection to the last."""
         return self.last_t_s - self.first_t_s
 
-    def score(self) -> float:
-        """Running evidence: the weights times the fixed or static factor last judged
-        (``TrackEstimator._judge``) and the sensors' factor."""
-        return self.weight * self.still * (1.0 + 0.5 * self.both / max(self.hits, 1))
+    def score(self, cfg: TrackingConfig) -> float:
+        """Running evidence; "static" and "fixed" (see ``cldet.core.selection``: here the box
+        around the running means, whose edge is about twice the spread) are judged once the
+        track has lived ``causal_judge_s`` (when 0: ``_JUDGE_STATIC_S``, fixed
+        ``FIXED_JUDGE_S``); the fixed spread grows to the detections' mean sampling jitter
+        times ``fixed_sampling_factor`` as in the refinement."""
+        lived = self.lived
+        factor = 1.0
+        judge_fixed = cfg.causal_judge_s or FIXED_JUDGE_S
+        judge_static = cfg.causal_judge_s or _JUDGE_STATIC_S
+        if (
+            lived >= judge_fixed
+            and self.means > FIXED_MEAN_HITS
+            and self.mean_moved < 2.0 * fixed_spread(cfg, self.jitter_sum / self.hits)
+        ):
+            factor = cfg.fixed_factor
+        elif lived >= judge_static and self.moved < 2.0 * cfg.static_spread_m:
+            factor = cfg.static_factor
+        return self.weight * factor * (1.0 + 0.5 * self.both / max(self.hits, 1))
 
 
 def fuse_points(frame: LidarFrame, cfg: CldetConfig) -> tuple[NDArray[np.float32], int]:
@@ -593,7 +616,7 @@ class TrackEstimator:
             row[tid] = i
             if tid != self._choice and ev.lived < tc.causal_judge_s:
                 continue  # not chosen before it can be judged static or fixed
-            h = self._judge(tid, ev).score()
+            h = ev.score(tc)
             if tid == self._choice:
                 base = self._base
             elif lost is not None and self._continues(tid):
@@ -668,27 +691,6 @@ class TrackEstimator:
         pos = apply_bias(pos[None, :], self.config.bias)[0]
         return Estimate(stamp_ns, pos, Source.DETECTED if seen else Source.PREDICTED, n, sigma)
 
-    def _judge(self, track_id: int, ev: _Evidence) -> _Evidence:
-        """``ev`` with its fixed or static factor judged as the refinement judges a track
-        (``selection.still_factor``: 90 % of its detections, or of its running means, near
-        their median; a few stray detections, say where the track began on a fragment, do not
-        undo it), once it has lived ``causal_judge_s`` (when 0: static after
-        ``_JUDGE_STATIC_S``, fixed after ``FIXED_JUDGE_S``); re-judged as its detections grow
-        by a quarter (at least ``_LEARNED_EVERY``)."""
-        tc = self.config.tracking
-        if ev.lived < (tc.causal_judge_s or _JUDGE_STATIC_S) or (
-            ev.still_hits and ev.hits < max(ev.still_hits + _LEARNED_EVERY, 1.25 * ev.still_hits)
-        ):
-            return ev
-        rec = self._tracker.record(track_id)
-        if rec is not None:
-            t = self._times[rec.frames]
-            ev.still = still_factor(
-                t, rec.positions, ev.jitter_sum / ev.hits, tc, tc.causal_judge_s or FIXED_JUDGE_S
-            )
-            ev.still_hits = ev.hits
-        return ev
-
     def _learned_factor(self, track_id: int, hits: int) -> float:
         """The learned re-weighing of a track's running evidence (:class:`TrackWeigher`), as in
         the refinement, from its detections so far; recomputed once its
@@ -750,7 +752,7 @@ class TrackEstimator:
         sc = own.get(track_id)
         if sc is None:  # a track that took the followed one's object over (``_hand_over``)
             ev = self._evidence[track_id]
-            sc = self._judge(track_id, ev).score() * self._learned_factor(track_id, ev.hits)
+            sc = ev.score(self.config.tracking) * self._learned_factor(track_id, ev.hits)
         self._value = self._base + sc
 
     def _hand_over(
@@ -840,7 +842,9 @@ class TrackEstimator:
         self._line_t = t_now
         times = self._times[: index + 1]
         i0 = int(np.searchsorted(times, t_now - tc.causal_line_window_s, side="left"))
-        lines = find_lines(self._tables[i0 : index + 1], times[i0:], tc, -1, self._offset_s)
+        lines = find_lines(
+            self._tables[i0 : index + 1], times[i0:], tc, -1, self._offset_s, t_now - tc.line_seed_s
+        )
         if not lines:
             return
         lines = [replace(rec, frames=rec.frames + i0) for rec in lines]

@@ -8,9 +8,7 @@ on one straight line in space-time, and nothing else does: rain and dust returns
 independent from scan to scan, static clutter does not move, a walking person is slow.
 
 The search, over the clusters of the whole sequence (offline, inside ``refine``; the causal
-estimate runs it over its last few seconds while it follows no track, and takes a line only if
-seen lately; seeding only from the last second's sightings, a third of the cost, lost passes
-whose last second held one sighting):
+estimate runs it over its last few seconds, from seeds seen lately, while it follows no track):
 
 1. candidates: drone-sized clusters (``max_size_m``) whose points are not a lone return from
    something far smaller than a drone (``min_cross_section_m2``, see
@@ -141,16 +139,23 @@ class _Pool:
         return dist, np.where(np.isfinite(dist), idx[rows, best], -1)
 
 
-def _seeds(pool: _Pool, times_s: NDArray[np.float64], cfg: TrackingConfig) -> NDArray[np.int64]:
-    """(S,2) candidate pairs (earlier, later) whose implied speed a drone could fly."""
+def _seeds(
+    pool: _Pool, times_s: NDArray[np.float64], cfg: TrackingConfig, after_s: float = -np.inf
+) -> NDArray[np.int64]:
+    """(S,2) candidate pairs (earlier, later) whose implied speed a drone could fly, the later
+    one at ``after_s`` or after."""
     pairs = []
     frames = sorted(pool.trees)
     reach = min(cfg.line_seed_s, cfg.line_window_s)
     for i, a in enumerate(frames):
+        if times_s[a] < after_s - reach:
+            continue
         for b in frames[i + 1 :]:
             dt = float(times_s[b] - times_s[a])
             if dt > reach:
                 break
+            if times_s[b] < after_s:
+                continue
             hits = pool.trees[a].query_ball_tree(pool.trees[b], cfg.max_speed * dt)
             ia = np.repeat(np.arange(len(hits)), [len(h) for h in hits])
             if not len(ia):
@@ -304,6 +309,7 @@ def find_lines(
     cfg: TrackingConfig,
     first_id: int,
     half_scan_s: float = 0.05,
+    seeds_after_s: float = -np.inf,
 ) -> list[TrackRecord]:
     """Candidate tracks of sparse fast movers (see the module docstring).
 
@@ -316,6 +322,9 @@ def find_lines(
         half_scan_s: half a scan's duration: a scan's points are taken up to this long before
             or after the frame's observation time, so a line's tolerance grows by its speed
             times this.
+        seeds_after_s: lines start only from pairs whose later detection is this late or
+            later (they still grow back from there): the causal search looks for lines seen
+            lately, at a third of the cost.
 
     Returns:
         One TrackRecord per line found, ids from ``first_id`` on.
@@ -323,7 +332,7 @@ def find_lines(
     if not cfg.line_search or len(tables) < cfg.line_min_hits:
         return []
     pool = _Pool(tables, times_s, cfg)
-    seeds = _seeds(pool, times_s, cfg)
+    seeds = _seeds(pool, times_s, cfg, seeds_after_s)
     if not len(seeds):
         return []
     counts = _count(pool, seeds, times_s, cfg, half_scan_s)

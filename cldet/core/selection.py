@@ -103,7 +103,6 @@ __all__ = [
     "sampling_jitter",
     "score_tracks",
     "select_chain",
-    "still_factor",
 ]
 
 LEARNED_FLOOR = 0.3
@@ -165,15 +164,10 @@ def fixed_spread(cfg: TrackingConfig, jitter_m: float) -> float:
     return max(cfg.fixed_spread_m, cfg.fixed_sampling_factor * jitter_m)
 
 
-def _is_fixed(
-    t: NDArray[np.float64],
-    pos: NDArray[np.float64],
-    spread_m: float,
-    after_s: float = FIXED_JUDGE_S,
-) -> bool:
+def _is_fixed(t: NDArray[np.float64], pos: NDArray[np.float64], spread_m: float) -> bool:
     """Whether the running mean of ``FIXED_MEAN_HITS`` detections stays (90 %) within
-    ``spread_m`` of its median over at least ``after_s``: rigid structure, not a drone."""
-    if spread_m <= 0 or len(t) < 2 * FIXED_MEAN_HITS or t[-1] - t[0] < after_s:
+    ``spread_m`` of its median over at least ``FIXED_JUDGE_S``: rigid structure, not a drone."""
+    if spread_m <= 0 or len(t) < 2 * FIXED_MEAN_HITS or t[-1] - t[0] < FIXED_JUDGE_S:
         return False
     c = np.cumsum(np.vstack([np.zeros((1, 3)), pos]), axis=0)
     mean = (c[FIXED_MEAN_HITS:] - c[:-FIXED_MEAN_HITS]) / FIXED_MEAN_HITS
@@ -296,29 +290,16 @@ def _hand_factor(
     speeds = rec.speed[2:] if h > 3 else rec.speed[1:]
     if len(speeds) and _p90(speeds) > cfg.max_speed:
         factor *= 0.1
+    centre = np.median(pos, axis=0)
+    spread = _p90(np.linalg.norm(pos - centre, axis=1))
     jitter = float(np.median(sampling_jitter(det.extent, rec.n_points)))
-    factor *= still_factor(times_s[rec.frames], pos, jitter, cfg)
-    return factor * (1.0 + 0.5 * float(np.mean(det.both)))
-
-
-def still_factor(
-    t: NDArray[np.float64],
-    pos: NDArray[np.float64],
-    jitter_m: float,
-    cfg: TrackingConfig,
-    fixed_after_s: float = FIXED_JUDGE_S,
-) -> float:
-    """The fixed or static factor of a track's detections ``pos`` (H,3) at times ``t`` (H,)
-    (see the module docstring), 1 for neither; ``jitter_m``: its detections' sampling jitter
-    (``sampling_jitter``); fixed is judged once the track spans ``fixed_after_s``."""
-    if _is_fixed(t, pos, fixed_spread(cfg, jitter_m), fixed_after_s):
-        return cfg.fixed_factor
-    spread = _p90(np.linalg.norm(pos - np.median(pos, axis=0), axis=1))
-    if spread < cfg.static_spread_m or (
-        spread < _JITTER_M and _net_motion(t, pos) < cfg.static_spread_m
+    if _is_fixed(times_s[rec.frames], pos, fixed_spread(cfg, jitter)):
+        factor *= cfg.fixed_factor
+    elif spread < cfg.static_spread_m or (
+        spread < _JITTER_M and _net_motion(times_s[rec.frames], pos) < cfg.static_spread_m
     ):
-        return cfg.static_factor
-    return 1.0
+        factor *= cfg.static_factor
+    return factor * (1.0 + 0.5 * float(np.mean(det.both)))
 
 
 def link_reach(
