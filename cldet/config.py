@@ -371,6 +371,25 @@ class TrackingConfig(BaseModel):
         " track that lost the drone and coasted on single returns; 0: links leave at the next"
         " track's start only)",
     )
+    carve_gate_m: float = Field(
+        default=0.6,
+        ge=0,
+        description="a confirmed drone-sized track that has flown (background.protect_min_moved_m)"
+        " whose prediction falls in a cluster larger than max_size_m carves out the foreground"
+        " points within this radius of the blob there,"
+        " when they stand isolated (no more points in the shell out to twice the radius than"
+        " inside): the 1 m linkage chains rain near the sensor into one wide blob, and a drone"
+        " close by joins it, its detection then the blob's centroid metres away (0: off)",
+    )
+    chain_head_ratio: float = Field(
+        default=0.25,
+        ge=0,
+        le=1,
+        description="the chosen chain begins at its first track's first detection whose"
+        " cross-section reaches this fraction of the track's median: a track begun on lone"
+        " returns (rain, speckle) that its gate then led onto the drone has its head dropped (0:"
+        " off)",
+    )
     raw_gate_m: float = Field(
         default=0.0,
         ge=0,

@@ -118,6 +118,7 @@ from cldet.core.tracking import (
     CandidateTracker,
     ClusterTable,
     TrackRecord,
+    carve_tracked,
     constant_velocity_fit,
     cross_section,
     crowding,
@@ -390,15 +391,32 @@ class TrackEstimator:
         n_mid_fg = int(np.searchsorted(fg_idx, n_mid))
         labels = cluster_points(fg, cfg.clustering.eps_m, cfg.clustering.min_samples)
         labels[labels >= cfg.clustering.max_clusters] = -1  # ids rank by size: the smallest go
+        t0_ns = self._stamps[0] if self._stamps else frame.stamp_ns
+        t_s = (frame.stamp_ns - t0_ns) / NS_PER_S + self._offset_s
         clusters = summarize_clusters(fg, labels, n_mid_fg)
         table = ClusterTable.from_clusters(clusters)
+        if cfg.tracking.carve_gate_m > 0 and np.any(table.extent > cfg.tracking.max_size_m):
+            # the drone-sized tracks that have flown carve their objects out of wider clusters
+            ids, at = self._tracker.small_predictions(t_s)
+            flown = np.array([self._has_flown(int(i)) for i in ids], dtype=bool)
+            carved = carve_tracked(
+                fg,
+                labels,
+                table.extent,
+                at[flown],
+                cfg.tracking.carve_gate_m,
+                cfg.tracking.max_size_m,
+            )
+            if carved is not labels:
+                labels = carved
+                clusters = summarize_clusters(fg, labels, n_mid_fg)
+                table = ClusterTable.from_clusters(clusters)
         if len(clusters):
             crowd = crowding(table.centroid, table.n_points, cfg.tracking.crowd_radius_m)
             screened = bg.view().screened(table.centroid)
             table = replace(table, height=self._heights(clusters), crowd=crowd, screened=screened)
         self._stamps.append(frame.stamp_ns)
         self._tables.append(table)
-        t_s = (frame.stamp_ns - self._stamps[0]) / NS_PER_S + self._offset_s
         if index == len(self._times):
             self._times = np.concatenate([self._times, np.zeros(len(self._times))])
         self._times[index] = t_s
@@ -553,6 +571,13 @@ class TrackEstimator:
             ev.protected = True
         return protected
 
+    def _has_flown(self, track_id: int) -> bool:
+        """Whether a track's running mean now lies ``background.protect_min_moved_m`` or more
+        from its first value: a flight, not a swaying clump or a flickering edge."""
+        ev = self._evidence.get(track_id)
+        moved = self.config.background.protect_min_moved_m
+        return ev is not None and bool(ev.means) and ev.displaced >= moved
+
     def _protects_now(self, track_id: int) -> bool:
         """``_protects`` judged on this frame alone (without ``background.protect_hold``)."""
         tracker = self._tracker
@@ -560,7 +585,7 @@ class TrackEstimator:
             return False
         bc = self.config.background
         ev = self._evidence.get(track_id)
-        if ev is not None and ev.means and ev.displaced >= bc.protect_min_moved_m:
+        if self._has_flown(track_id):
             return True
         dense = bc.protect_dense_points
         young = ev is None or ev.means == 0

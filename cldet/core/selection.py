@@ -65,7 +65,12 @@ farther from the tail's end than any speed allows: the link may then leave A at 
 detection from which the jump is possible, dropping the rest, but only when the dropped tail
 is weak (its returns per detection average at most ``link_tail_ratio`` of the kept part's). A
 steady track of something else keeps its returns to the end and cannot be cut to feed a drone
-track. This is a dynamic programme over tracks sorted by start.
+track. This is a dynamic programme over tracks sorted by start. The chain's first track may in
+turn have begun on something else: a track started on lone returns (rain near the sensor,
+speckle) that its gate then led onto the drone. Its detections before the first whose
+cross-section (``cross_section``: returns scaled by range^2, so a far drone's few returns count
+as much as a near one's many) reaches ``chain_head_ratio`` of the median over the track are
+dropped: the chain begins where the object it follows is first seen whole.
 
 The chosen chain is then carried on at both ends (``extend_chain``) by tracks too weak to be
 worth a link that touch it: a detection at most ``extend_gap_s`` (0.5 s) before its first or
@@ -127,6 +132,7 @@ class ScoredTrack:
     positions: NDArray[np.float64]  # (H,3) cluster centroids, metres
     contribution: NDArray[np.float64]  # (H,) each detection's weight in the score
     score: float
+    cross: NDArray[np.float64] | None = None  # (H,) cross-section, m^2 (``cross_section``)
 
 
 def _net_motion(t: NDArray[np.float64], pos: NDArray[np.float64]) -> float:
@@ -265,7 +271,7 @@ def score_tracks(
         feats = np.array([track_features(r, d, times_s[r.frames]) for r, d, _ in kept])
         factors = factors * weigher(feats)
     out = []
-    for (rec, _, per_det), factor in zip(kept, factors, strict=True):
+    for (rec, det, per_det), factor in zip(kept, factors, strict=True):
         contribution = per_det * float(factor)
         contribution[0] = 0.0  # a track's first detection is no evidence of persistence
         out.append(
@@ -275,6 +281,7 @@ def score_tracks(
                 positions=rec.positions,
                 contribution=contribution,
                 score=float(contribution.sum()),
+                cross=det.cross,
             )
         )
     return out
@@ -380,7 +387,20 @@ def select_chain(
         end = int(parent_cut[b])
         b = int(parent[b])
     chain.reverse()
+    first, _, end = chain[0]
+    chain[0] = (first, _weak_head(first, end, cfg), end)
     return chain
+
+
+def _weak_head(tr: ScoredTrack, end: int, cfg: TrackingConfig) -> int:
+    """How many of the chain's first track's first hits to drop (see the module docstring):
+    those before its first detection whose cross-section reaches ``chain_head_ratio`` of the
+    median of its hits up to ``end`` (0: none; at least ``MIN_TRACK_HITS`` are kept)."""
+    if cfg.chain_head_ratio <= 0 or tr.cross is None:
+        return 0
+    cross = tr.cross[:end]
+    h = int(np.argmax(cross >= cfg.chain_head_ratio * np.median(cross)))
+    return h if end - h >= MIN_TRACK_HITS else 0
 
 
 def extend_chain(

@@ -1,6 +1,6 @@
 """Candidate tracks: every cluster seeds or extends a constant-velocity Kalman track.
 
-Offline multi-target tracking over the per-frame clusters of a whole sequence. No track is
+Multi-target tracking over the per-frame clusters of a sequence. No track is
 "the drone" yet: all plausible movers (the drone, a walking person, a bird, speckle, branches)
 keep their own candidate track, and ``cldet.core.selection`` picks the drone afterwards from
 whole-sequence evidence. Per frame:
@@ -18,6 +18,10 @@ whole-sequence evidence. Per frame:
    that got no cluster searches the frame's raw points,
    background included, within ``raw_gate_m`` of its prediction: a drone that stops right at
    static structure (hovering over a car) is learned as background but must not vanish.
+
+Before association the estimator lets the confirmed drone-sized tracks that have flown carve their objects
+out of clusters wider than a drone (``carve_tracked``, ``carve_gate_m``): near the sensor the
+1 m linkage chains rain returns into one wide cluster, and a drone flying there joins it.
 
 All tracks share the frame's dt, so the filter runs vectorised over tracks; each track's
 covariance is one 2x2 (see ``cldet.core.smoothing``).
@@ -45,6 +49,7 @@ __all__ = [
     "TrackRecord",
     "constant_velocity_fit",
     "crowding",
+    "carve_tracked",
     "cross_section",
 ]
 
@@ -442,6 +447,22 @@ class CandidateTracker:
             pos_var=self._P[:, 0, 0].copy(),
         )
 
+    def small_predictions(self, t_s: float) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """The ids (T,) of the confirmed drone-sized tracks (``raw_min_cluster_hits`` cluster
+        detections or more, the last no larger than ``max_size_m``) and where they would be at
+        ``t_s`` (T,3), by their constant velocity; the tracks themselves are not changed."""
+        cfg = self.cfg
+        sel = [
+            i
+            for i, tid in enumerate(self._ids.tolist())
+            if self._hits[tid].n_cluster_hits >= cfg.raw_min_cluster_hits
+            and self._hits[tid].last_extent <= cfg.max_size_m
+        ]
+        if not sel or self._t is None:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+        x = self._x[sel]
+        return self._ids[sel], np.asarray(x[:, :, 0] + (t_s - self._t) * x[:, :, 1])
+
     def is_confirmed_mover(self, track_id: int) -> bool:
         """Enough cluster hits, drone-sized, and it has moved (the raw-gate criterion)."""
         cfg = self.cfg
@@ -514,24 +535,102 @@ def _to_record(tid: int, h: _Hits) -> TrackRecord:
     )
 
 
+CARVE_SHELL_RATIO = 0.5
+"""``carve_tracked`` takes a blob only where the shell out to twice its radius holds at most
+this fraction of the returns within it: a compact body's neighbours are the lone returns it
+chained to; a line through the gate returns about as much in the shell as within, a surface
+three times as much."""
+
+
+def carve_tracked(
+    points: NDArray[np.floating],
+    labels: NDArray[np.int32],
+    extent: NDArray[np.float64],
+    centres: NDArray[np.float64],
+    gate_m: float,
+    max_size_m: float,
+) -> NDArray[np.int32]:
+    """``labels`` (from ``cluster_points``; ``extent`` (K,), each cluster's largest box edge)
+    with the isolated blobs at ``centres`` carved out of clusters wider than ``max_size_m``,
+    each as a new cluster (ids after the existing ones).
+
+    At each centre (where a confirmed drone-sized track predicts its object) the points of a
+    wide cluster within ``gate_m`` are found, the centre moved to their mean; when the points
+    within ``gate_m`` of that stand isolated among all ``points`` (``_isolated`` with
+    ``CARVE_SHELL_RATIO``, counting what lies below), those within ``gate_m`` of their own mean
+    are taken, if the wide cluster reaches beyond the shell (twice ``gate_m``): a compact
+    object whose returns merely chain to others through the linkage (rain near the sensor)
+    comes apart; a piece of a wider surface or of a line (a hedge, a wall, a branch, a
+    railing), a person's head and shoulders, or an object a little wider than a drone do not.
+    """
+    k = len(extent)
+    wide = extent > max_size_m
+    if len(centres) == 0 or not wide.any():
+        return labels
+    valid = labels >= 0
+    in_wide = np.flatnonzero(valid)[wide[labels[valid]]]
+    pts = np.asarray(points, dtype=np.float64)
+    out = labels.copy()
+    g2 = gate_m * gate_m
+    changed = False
+    for c in np.asarray(centres, dtype=np.float64):
+        d = pts[in_wide] - c
+        near = in_wide[np.einsum("ij,ij->i", d, d) <= g2]
+        near = near[out[near] < k]  # not carved already
+        if len(near) == 0:
+            continue
+        inside = _isolated(pts - pts[near].mean(axis=0), gate_m, CARVE_SHELL_RATIO, below=True)
+        if inside is None:
+            continue
+        d = pts - pts[inside].mean(axis=0)  # centred on the isolated blob itself
+        d2 = np.einsum("ij,ij->i", d, d)
+        taken = np.flatnonzero((d2 <= g2) & (out >= 0) & (out < k))
+        taken = taken[extent[out[taken]] > max_size_m]
+        if len(taken) == 0:
+            continue
+        # a merger: the cluster reaches beyond the shell (else it is one object a little wider
+        # than a drone, or a drone with a fringe, and carving would split it in two)
+        hit = np.bincount(out[taken], minlength=k)
+        if not np.any(np.isin(out, np.flatnonzero(hit)) & (d2 > 4.0 * g2)):
+            continue
+        out[taken] = out.max() + 1
+        changed = True
+    return out if changed else labels
+
+
+def _isolated(
+    d: NDArray[np.float64], gate_m: float, shell_ratio: float = 1.0, below: bool = False
+) -> NDArray[np.bool_] | None:
+    """Which of the points at offsets ``d`` (N,3) from a centre lie within ``gate_m`` of it, if
+    they are isolated (else None).
+
+    Isolated: no more points in the shell ``gate_m..2 gate_m`` around the centre than
+    ``shell_ratio`` times those in the gate itself, ignoring what lies below unless ``below``
+    (a car roof, a lamp post under a hovering drone). A wall, a tree or the ground fails the
+    test; with ``shell_ratio`` below 1 a pole or a branch through the gate does too (it returns
+    as much along the shell's width as along the gate's), and with ``below`` a person's head
+    and shoulders (their body below).
+    """
+    d2 = np.einsum("ij,ij->i", d, d)
+    inside = d2 <= gate_m * gate_m
+    n_in = int(inside.sum())
+    shell = ~inside & (d2 <= 4.0 * gate_m * gate_m)
+    n_shell = int(np.sum(shell if below else shell & (d[:, 2] >= -0.5 * gate_m)))
+    if n_in == 0 or n_shell > shell_ratio * n_in:
+        return None
+    return inside
+
+
 def _isolated_blob(
     raw: NDArray[np.floating], tree: cKDTree, centre: NDArray[np.float64], gate_m: float
 ) -> tuple[NDArray[np.float64], int] | None:
-    """Mean and count of the raw points within ``gate_m`` of ``centre`` if they are isolated.
-
-    Isolated: no more points in the shell ``gate_m..2 gate_m`` around the centre than in the
-    gate itself, ignoring what lies below (a car roof, a lamp post under a hovering drone).
-    A wall, a tree or the ground fails the test. ``tree`` indexes ``raw``.
-    """
+    """Mean and count of the raw points within ``gate_m`` of ``centre`` if they are isolated
+    (``_isolated``). ``tree`` indexes ``raw``."""
     near = np.asarray(tree.query_ball_point(centre, 2.0 * gate_m), dtype=np.intp)
     if len(near) == 0:
         return None
     p = np.asarray(raw[near], dtype=np.float64)
-    d = p - centre
-    d2 = np.einsum("ij,ij->i", d, d)
-    inside = d2 <= gate_m * gate_m
-    n_in = int(inside.sum())
-    n_shell = int(np.sum(~inside & (d[:, 2] >= -0.5 * gate_m)))
-    if n_in == 0 or n_shell > n_in:
+    inside = _isolated(p - centre, gate_m)
+    if inside is None:
         return None
-    return p[inside].mean(axis=0), n_in
+    return p[inside].mean(axis=0), int(inside.sum())

@@ -1038,6 +1038,44 @@ def test_tracks_strung_through_rain_weigh_less_than_a_sparse_high_drone() -> Non
 
 
 @pytest.mark.slow
+def test_a_drone_that_flies_into_rain_near_the_sensor_is_carved_out_of_the_rain() -> None:
+    # a drone flies from 10 m to 2.5 m from the sensor in 3 s and hovers there 3 s, in rain
+    # (300 lone returns a scan, most within 6 m: near the sensor the 1 m linkage chains them
+    # into one wide cluster, and the drone joins it). The track it had before, which has flown,
+    # carves its returns out of that cluster (tracking.carve_gate_m); without, its detection
+    # is the wide cluster's centroid and the drone is lost
+    from tests.core.scene import scan
+
+    empty = np.zeros((0, 3), np.float32)
+    spot = np.array([2.5, 1.5, 0.8])
+    start = spot + np.array([7.0, -3.0, 0.5])
+    path = np.array([start + (spot - start) * min(k / 30, 1.0) for k in range(60)])
+
+    def failures(carve_gate_m: float) -> int:
+        cfg = load_config(overrides={"tracking": {"carve_gate_m": carve_gate_m}})
+        fails = 0
+        for seed in range(4):
+            rng = np.random.default_rng(seed)
+            frames = [
+                LidarFrame(
+                    k * 100_000_000,
+                    np.concatenate(
+                        [scan(rng, [((*p,), 0.3)], n_rays=6000), _rain(rng, rng.poisson(300))]
+                    ).astype(np.float32),
+                    empty,
+                )
+                for k, p in enumerate(path)
+            ]
+            _, result = estimate_sequence(frames, cfg)
+            pos = np.array([e.position for e in result.estimates[5:]])
+            fails += int(_rms(np.linalg.norm(pos - path[5:], axis=1)) > 1.0)
+        return fails
+
+    assert failures(0.6) <= 1
+    assert failures(0.0) >= 3
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [10097, 10105, 10189])
 def test_the_learned_prior_picks_the_drone_where_the_hand_set_factors_do_not(seed: int) -> None:
     # three randomised development worlds outside the prior's training seeds (10200-10599) on

@@ -283,3 +283,84 @@ def test_the_chain_is_carried_on_by_weak_tracks_that_touch_it_and_by_nothing_els
     # without the evidence floor the specks carry it on too
     bare = TrackingConfig(extend_min_evidence=0.0)
     assert [tr.record.track_id for tr, _, _ in extend_chain(chain, tracks, bare)] == [1, 2, 4, 6]
+
+
+def _chained_blob(rng: np.random.Generator, around: np.ndarray) -> np.ndarray:
+    """A drone's 30 returns within 0.15 m of ``around``, strung by lone returns 0.8 m apart
+    (rain near the sensor) to 4 m away: the 1 m linkage makes one cluster of them."""
+    blob = around + rng.normal(0.0, 0.05, (30, 3))
+    chain = around + np.outer(np.arange(1, 6) * 0.8, [1.0, 0.0, 0.0]) + rng.normal(0, 0.02, (5, 3))
+    return np.concatenate([blob, chain])
+
+
+def _carve(points: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The 1 m linkage's labels of ``points``, and those after ``carve_tracked`` at ``centres``
+    (gate 0.6 m, drones up to 1.2 m)."""
+    from cldet.core.clustering import cluster_points, summarize_clusters
+    from cldet.core.tracking import carve_tracked
+
+    labels = cluster_points(points, 1.0, 1)
+    extent = ClusterTable.from_clusters(summarize_clusters(points, labels)).extent
+    return labels, carve_tracked(points, labels, extent, centres, 0.6, 1.2)
+
+
+def test_a_tracked_blob_chained_to_rain_is_carved_out_of_the_wide_cluster() -> None:
+    rng = np.random.default_rng(0)
+    drone = np.array([3.0, 1.0, 1.0])
+    pts = _chained_blob(rng, drone)
+    labels, out = _carve(pts, drone[None, :] + 0.2)
+    assert np.all(labels == 0)  # merged: the cluster's centroid lies 0.5 m from the drone
+    assert np.all(out[:30] == 1) and np.all(out[30:] == 0)
+    # no track predicted there, or none in a wide cluster: nothing changes
+    assert np.array_equal(_carve(pts, np.zeros((0, 3)))[1], labels)
+    assert np.array_equal(_carve(pts, drone[None, :] + 3.0)[1][:30], labels[:30])
+    alone, out = _carve(pts[:30], drone[None, :])
+    assert np.array_equal(out, alone)
+
+
+def test_a_tracked_piece_of_a_wider_surface_is_not_carved_out() -> None:
+    # a track on a piece of a hedge (3 m by 1 m of returns 0.1 m apart) or of a railing (3 m,
+    # returns 5 cm apart) predicts into it, but the returns around that piece are about as
+    # many as within it (the hedge is no taller than the gate is wide), or a body below it: no
+    # compact object there. Nor is a drone a little wider than max_size_m split from its arms:
+    # its cluster does not reach beyond the shell, it merged with nothing
+    yy, zz = np.meshgrid(np.arange(0.0, 3.0, 0.1), np.arange(0.0, 1.0, 0.1))
+    hedge = np.stack([np.full(yy.size, 5.0), yy.ravel(), zz.ravel()], axis=1)
+    rail = np.column_stack([np.full(60, 5.0), np.arange(60) * 0.05, np.full(60, 0.5)])
+    # a person 1.8 m tall, a track on their head and shoulders (their legs hidden a while)
+    rng = np.random.default_rng(1)
+    az, z = rng.uniform(0, 2 * np.pi, 400), rng.uniform(0.0, 1.8, 400)
+    person = np.column_stack([5.0 + 0.2 * np.cos(az), 1.5 + 0.2 * np.sin(az), z])
+    # a drone a little wider than max_size_m: a dense body, a few returns on its arms
+    body = rng.normal(0.0, 0.1, (40, 3)) + [5.0, 1.5, 0.5]
+    arms = np.array([[5.0 + x, 1.5, 0.5] for x in (-0.7, -0.65, 0.65, 0.7)])
+    drone = np.concatenate([body, arms])
+    for surface in (hedge, rail, person, drone):
+        labels, out = _carve(surface, np.array([[5.0, 1.5, 0.5 if surface is not person else 1.6]]))
+        assert np.array_equal(out, labels)
+
+
+def test_the_chain_drops_a_head_of_lone_returns_but_not_a_far_drone_approaching() -> None:
+    cfg = TrackingConfig(crowd_radius_m=0.0)
+
+    def chain_start(items: list[tuple[np.ndarray, float, int]]) -> tuple[int, int]:
+        """The chain's first hit index, with chain_head_ratio and without."""
+        tables = [_table([item]) for item in items]
+        out = []
+        for ratio in (0.25, 0.0):
+            _, chain = _run(tables, cfg.model_copy(update={"chain_head_ratio": ratio}))
+            assert len(chain) == 1 and len(chain[0][0].times_s) == len(tables)
+            out.append(chain[0][1])
+        return out[0], out[1]
+
+    # a track begun on lone returns (rain, up to 1.3 m from the drone) that its gate led onto
+    # a drone 3 m out, 40 returns a scan
+    step = 0.25 * np.array([1.0, 0.3, 0.1])
+    rain = [(np.array([3.0, 0.0, 1.0]) - (5 - k) * step, 0.0, 1) for k in range(5)]
+    drone = [(np.array([3.0, 0.1 * k, 1.0]), 0.3, 40) for k in range(20)]
+    assert chain_start(rain + drone) == (5, 0)
+    # a drone passing at 6 m/s from 15 m out to 3 m and on: few returns far out, as many per
+    # area as near
+    path = [np.array([15.0 - 0.6 * k, 3.0, 1.0]) for k in range(30)]
+    passing = [(p, 0.3, max(1, round(40 * (3.0 / np.linalg.norm(p)) ** 2))) for p in path]
+    assert chain_start(passing) == (0, 0)
