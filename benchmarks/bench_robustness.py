@@ -94,16 +94,16 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
 
 
 def at_stamps(estimates: Sequence[Any], stamps_ns: NDArray[np.int64]) -> NDArray[np.float64] | None:
-    """Estimates (``stamp_ns``, ``position``) interpolated linearly to ``stamps_ns`` (clamped)."""
+    """Estimates (``stamp_ns``, ``position``; in time order) interpolated linearly to
+    ``stamps_ns`` (clamped)."""
     if not estimates:
         return None
     t = np.array([e.stamp_ns for e in estimates], dtype=np.int64)
     pos = np.array([e.position for e in estimates], dtype=np.float64).reshape(-1, 3)
-    order = np.argsort(t, kind="stable")
     t0 = int(stamps_ns[0])
-    tt = (t[order] - t0).astype(np.float64)
+    tt = (t - t0).astype(np.float64)
     q = (stamps_ns - t0).astype(np.float64)
-    return np.column_stack([np.interp(q, tt, pos[order, k]) for k in range(3)])
+    return np.column_stack([np.interp(q, tt, pos[:, k]) for k in range(3)])
 
 
 PARTS = ("before", "gaps", "detected", "after", "undetected")
@@ -121,7 +121,8 @@ def score(
 ) -> dict[str, Any]:
     """A row's scores: ``rms`` (3D error), ``sse`` (sum of squared 3D errors), ``n`` (rows) and
     ``parts`` (``error_parts``); no estimates at all count as the origin."""
-    pos = at_stamps(estimates or (), stamps_ns)
+    est = sorted(estimates or (), key=lambda e: e.stamp_ns)  # a tie goes to the earlier
+    pos = at_stamps(est, stamps_ns)
     if pos is None:
         pos = np.zeros_like(truth)
     sq = np.sum((pos - truth) ** 2, axis=1)
@@ -129,7 +130,7 @@ def score(
         "rms": float(np.sqrt(np.mean(sq))),
         "sse": float(np.sum(sq)),
         "n": int(len(sq)),
-        "parts": error_parts(estimates, stamps_ns, sq),
+        "parts": error_parts(est, stamps_ns, sq),
     }
 
 
@@ -138,9 +139,10 @@ def error_parts(
 ) -> dict[str, float]:
     """The squared 3D errors ``sq`` at ``stamps_ns`` summed by where each truth row lies
     (``PARTS``): before the first DETECTED estimate, after the last, on a row whose nearest
-    estimate is DETECTED, in the gaps between; all "undetected" when no estimate is DETECTED."""
+    estimate (``estimates`` in time order) is DETECTED, in the gaps between; all "undetected"
+    when no estimate is DETECTED."""
     parts = dict.fromkeys(PARTS, 0.0)
-    est = sorted(estimates or (), key=lambda e: e.stamp_ns)  # a tie goes to the earlier
+    est = estimates or ()
     t = np.array([e.stamp_ns for e in est], dtype=np.int64)
     detected = np.array([e.source.name == "DETECTED" for e in est], dtype=bool)
     if not detected.any():

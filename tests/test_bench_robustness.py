@@ -56,6 +56,7 @@ def test_score_interpolates_and_clamps(bench: ModuleType) -> None:
     scores = bench.score(est, stamps, truth)
     assert (scores["sse"], scores["n"]) == (pytest.approx(1.0), 3)
     assert scores["rms"] == pytest.approx(np.sqrt(1.0 / 3.0))
+    assert bench.score(est[::-1], stamps, truth)["sse"] == pytest.approx(1.0)  # any order
     scores = bench.score(None, stamps, truth)  # no estimate: the origin
     assert scores["sse"] == pytest.approx(1.0 + 4.0 + 1.0)
 
