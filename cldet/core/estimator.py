@@ -16,7 +16,11 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    a far drone gives 1-3 points); each cluster's height above the local ground comes from the
    fitted ground (``cldet.core.ground``), set to 0 when the cluster may continue below what is
    seen (cut by the bottom of the Mid-360's field of view, ``fov_bottom_deg`` in the sensor's
-   own frame, or hidden by the ground's background margin one cell below);
+   own frame, or hidden by the ground's background margin one cell below); where a confirmed
+   drone-sized track that has flown predicts its object inside a cluster wider than a drone,
+   the isolated blob there is carved out as a cluster of its own (``tracking.carve_gate_m``,
+   ``cldet.core.tracking.carve_tracked``: rain near the sensor chains into one wide cluster
+   that a close drone joins);
 4. every cluster seeds or extends a candidate Kalman track (``cldet.core.tracking``), at the
    time its points were taken (the stamp plus ``frames.scan_offset_s``, the middle of the
    scan); a confirmed moving track that gets no cluster continues on the raw points near its
