@@ -376,10 +376,11 @@ class TrackingConfig(BaseModel):
         ge=0,
         description="a confirmed drone-sized track that has flown (background.protect_min_moved_m)"
         " whose prediction falls in a cluster larger than max_size_m carves out the foreground"
-        " points within this radius of the blob there,"
-        " when they stand isolated (no more points in the shell out to twice the radius than"
-        " inside): the 1 m linkage chains rain near the sensor into one wide blob, and a drone"
-        " close by joins it, its detection then the blob's centroid metres away (0: off)",
+        " points within this radius of the blob there, when they stand isolated (at most half as"
+        " many points in the shell out to twice the radius, what lies below counted) and the wide"
+        " cluster reaches beyond that shell: the 1 m linkage chains rain near the sensor into one"
+        " wide blob, and a drone close by joins it, its detection then the blob's centroid"
+        " metres away (0: off)",
     )
     chain_head_ratio: float = Field(
         default=0.25,

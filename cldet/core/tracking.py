@@ -19,9 +19,10 @@ whole-sequence evidence. Per frame:
    background included, within ``raw_gate_m`` of its prediction: a drone that stops right at
    static structure (hovering over a car) is learned as background but must not vanish.
 
-Before association the estimator lets the confirmed drone-sized tracks that have flown carve their objects
-out of clusters wider than a drone (``carve_tracked``, ``carve_gate_m``): near the sensor the
-1 m linkage chains rain returns into one wide cluster, and a drone flying there joins it.
+Before association the estimator lets the confirmed drone-sized tracks that have flown carve
+their objects out of clusters wider than a drone (``carve_tracked``, ``carve_gate_m``): near the
+sensor the 1 m linkage chains rain returns into one wide cluster, and a drone flying there
+joins it.
 
 All tracks share the frame's dt, so the filter runs vectorised over tracks; each track's
 covariance is one 2x2 (see ``cldet.core.smoothing``).
@@ -47,9 +48,9 @@ __all__ = [
     "CandidateTracker",
     "ClusterTable",
     "TrackRecord",
+    "carve_tracked",
     "constant_velocity_fit",
     "crowding",
-    "carve_tracked",
     "cross_section",
 ]
 
@@ -590,8 +591,7 @@ def carve_tracked(
             continue
         # a merger: the cluster reaches beyond the shell (else it is one object a little wider
         # than a drone, or a drone with a fringe, and carving would split it in two)
-        hit = np.bincount(out[taken], minlength=k)
-        if not np.any(np.isin(out, np.flatnonzero(hit)) & (d2 > 4.0 * g2)):
+        if not np.any(np.isin(out, np.unique(out[taken])) & (d2 > 4.0 * g2)):
             continue
         out[taken] = out.max() + 1
         changed = True
