@@ -7,6 +7,7 @@ The stored notebooks must carry no outputs.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import nbformat
@@ -35,6 +36,13 @@ def test_the_notebooks_exist() -> None:
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
 def test_notebook_is_stored_clean(path: Path) -> None:
     assert path.stat().st_size < MAX_STORED_BYTES
+    # as stored: nbformat.read gives a 4.5 cell without an id one and only warns (a hard error
+    # in future nbformat versions)
+    stored = json.loads(path.read_text(encoding="utf-8"))
+    if (stored["nbformat"], stored["nbformat_minor"]) >= (4, 5):
+        ids = [cell.get("id") for cell in stored["cells"]]
+        assert None not in ids, f"{path.name}: a cell without an id"
+        assert len(set(ids)) == len(ids), f"{path.name}: repeated cell ids"
     nb = nbformat.read(path, as_version=4)
     nbformat.validate(nb)
     assert nb.metadata["kernelspec"]["name"] == "python3"
