@@ -431,6 +431,14 @@ class TrackingConfig(BaseModel):
         " static or rigidly fixed from then on (a still object and a drone just arrived look"
         " alike for their first second; 0: chosen at once, judged only after 1 s and 2 s)",
     )
+    causal_robust_still: bool = Field(
+        default=True,
+        description="causal: a track is judged rigidly fixed also from its detections after"
+        " its first causal_judge_s alone (90 % of their running means near the median, as the"
+        " refinement judges), not only from the box around all its running means, which one"
+        " stray early detection (the track begun on clutter beside a sign) widens for good;"
+        " false: the box",
+    )
     line_search: bool = Field(
         default=True,
         description="track-before-detect for sparse fast movers: constant-velocity lines through"
@@ -541,6 +549,14 @@ class SmoothingConfig(BaseModel):
         " behind static structure, or too sparse to be sure of); otherwise, where the static"
         " scene at that end could hide a drone (it stopped and was learned, or it came out of a"
         " hover), the position is held instead (0: off)",
+    )
+    ground_floor_m: float = Field(
+        default=0.5,
+        ge=0,
+        description="the refinement's extrapolation beyond the detections is held where it would"
+        " pass this far below the local ground where that ground was seen (nothing flies"
+        " through it: a drone carried on down there had landed, or had risen from there);"
+        " 0: the extrapolation may go underground",
     )
     unseen_confidence: float = Field(
         default=0.95,

@@ -37,7 +37,9 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    reported before its own evidence reaches ``tracking.causal_confirm``, and none is chosen
    before it has lived
    ``tracking.causal_judge_s``, from when on it is judged static or rigidly fixed: for its
-   first second a still object, say a sign overhead, looks like a drone that just arrived);
+   first second a still object, say a sign overhead, looks like a drone that just arrived;
+   rigid also by its detections after its first second alone, ``tracking.causal_robust_still``:
+   ``_rigid``);
    the estimate is that track's filtered state moved back from the points' time to the stamp.
    In a frame the followed track misses, the estimate follows the line of the straight run
    that ends its detections, where one does (``smoothing.causal_straight_coast``: the filter
@@ -60,6 +62,8 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    followed along its fit, as a lost straight track is, whatever a lost chain's evidence (a
    line is a coast, not a chosen track).
    A sparse fast pass, one return in a few scans, never makes a Kalman track to follow.
+   A predicted estimate that would lie underground is held at the last one
+   (``smoothing.ground_floor_m``: ``_above_ground``).
 
 ``refine``: the candidate tracks plus the constant-velocity lines of sparse fast movers
 (``cldet.core.lines``, track-before-detect); the drone's chain of tracks chosen by
@@ -70,7 +74,8 @@ forward-backward RTS smoother (``cldet.core.smoothing``) fills
 the gaps; before the first and after the last detection the track's own motion is
 extrapolated, its velocity decaying with time constant ``extrapolation_tau_s``, or held still
 where carrying it on contradicts what was not seen, or where the static scene shows it came
-to rest at its end (``_stop_unseen``); the centroid
+to rest at its end (``_stop_unseen``), and held where it would go underground, as nothing
+flies through the ground (``_stop_at_ground``); the centroid
 bias correction (``cldet.core.bias``) is applied last. Only when no candidate track exists at
 all is the configured fallback position used.
 
@@ -112,6 +117,7 @@ from cldet.core.selection import (
     extend_chain,
     fixed_spread,
     link_reach,
+    rigid_now,
     sampling_jitter,
     score_tracks,
     select_chain,
@@ -186,6 +192,7 @@ class Candidates:
     times_s: NDArray[np.float64]  # (F,) each frame's observation time, s from the first stamp
     stamps_ns: NDArray[np.int64]  # (F,)
     view: StaticView | None = None  # the static scene after the last frame (None: unknown)
+    ground: GroundModel | None = None  # the ground after the last frame (None: unknown)
 
 
 class Estimator(Protocol):
@@ -297,20 +304,23 @@ class _Evidence:
         """Seconds from the first detection to the last."""
         return self.last_t_s - self.first_t_s
 
-    def score(self, cfg: TrackingConfig) -> float:
+    def score(self, cfg: TrackingConfig, rigid: bool = False) -> float:
         """Running evidence; "static" and "fixed" (see ``cldet.core.selection``: here the box
         around the running means, whose edge is about twice the spread) are judged once the
         track has lived ``causal_judge_s`` (when 0: ``_JUDGE_STATIC_S``, fixed
         ``FIXED_JUDGE_S``); the fixed spread grows to the detections' mean sampling jitter
-        times ``fixed_sampling_factor`` as in the refinement."""
+        times ``fixed_sampling_factor`` as in the refinement. ``rigid``: judged fixed from its
+        detections after its head (``selection.rigid_now``; ``tracking.causal_robust_still``)."""
         lived = self.lived
         factor = 1.0
         judge_fixed = cfg.causal_judge_s or FIXED_JUDGE_S
         judge_static = cfg.causal_judge_s or _JUDGE_STATIC_S
-        if (
-            lived >= judge_fixed
-            and self.means > FIXED_MEAN_HITS
-            and self.mean_moved < 2.0 * fixed_spread(cfg, self.jitter_sum / self.hits)
+        if lived >= judge_fixed and (
+            rigid
+            or (
+                self.means > FIXED_MEAN_HITS
+                and self.mean_moved < 2.0 * fixed_spread(cfg, self.jitter_sum / self.hits)
+            )
         ):
             factor = cfg.fixed_factor
         elif lived >= judge_static and self.moved < 2.0 * cfg.static_spread_m:
@@ -354,6 +364,7 @@ class TrackEstimator:
         # per track the hits its last factor was computed at and the factor
         self._weigher = _weigher(model, config.tracking)
         self._learned: dict[int, tuple[int, float]] = {}
+        self._rigid_cache: dict[int, tuple[int, bool]] = {}  # causal_robust_still: (hits, rigid)
         self._choice: int | None = None  # causal: the track followed
         # causal (``tracking.causal_keep_lost``): the chain lost, the evidence the followed
         # track carries on from a lost chain it continues, and the followed chain's evidence
@@ -428,7 +439,7 @@ class TrackEstimator:
         self._forget_ended()
         keep = self._account(index, t_s, table, owner, labels, fg_idx, pts)
         bg.update(frame.stamp_ns, pts if keep is None else pts[keep])
-        estimate = self._decide(index, frame.stamp_ns, owner)
+        estimate = self._above_ground(self._decide(index, frame.stamp_ns, owner))
         self._causal.append(estimate)
         return FrameDetections(
             stamp_ns=frame.stamp_ns,
@@ -449,6 +460,7 @@ class TrackEstimator:
             alive = set(active.tolist())
             self._evidence = {k: v for k, v in self._evidence.items() if k in alive}
             self._learned = {k: v for k, v in self._learned.items() if k in alive}
+            self._rigid_cache = {k: v for k, v in self._rigid_cache.items() if k in alive}
 
     def _heights(self, clusters: tuple[Cluster, ...]) -> NDArray[np.float64]:
         """(K,) each cluster's lowest point above the local ground, 0 where it may continue."""
@@ -645,7 +657,7 @@ class TrackEstimator:
             row[tid] = i
             if tid != self._choice and ev.lived < tc.causal_judge_s:
                 continue  # not chosen before it can be judged static or fixed
-            h = ev.score(tc)
+            h = ev.score(tc, self._rigid(tid, ev))
             if tid == self._choice:
                 base = self._base
             elif lost is not None and self._continues(tid):
@@ -720,6 +732,43 @@ class TrackEstimator:
         pos = apply_bias(pos[None, :], self.config.bias)[0]
         return Estimate(stamp_ns, pos, Source.DETECTED if seen else Source.PREDICTED, n, sigma)
 
+    def _above_ground(self, estimate: Estimate) -> Estimate:
+        """A predicted causal estimate that would lie underground
+        (``smoothing.ground_floor_m``, as the refinement's ``_stop_at_ground``) is held at the
+        last estimate: nothing flies through the ground."""
+        floor = self.config.smoothing.ground_floor_m
+        if (
+            floor <= 0
+            or estimate.source != Source.PREDICTED
+            or not self._causal
+            or not self.background.ground.underground(estimate.position, floor)[0]
+        ):
+            return estimate
+        return replace(estimate, position=self._causal[-1].position.copy())
+
+    def _rigid(self, track_id: int, ev: _Evidence) -> bool:
+        """Whether a track is rigidly fixed by its detections after its first
+        ``causal_judge_s`` (its head), seen ``FIXED_JUDGE_S`` since (``selection.rigid_now``;
+        ``tracking.causal_robust_still``: the box around
+        all its running means, which one stray early detection widens for good, is not the
+        only judge). Recomputed as ``_learned_factor`` is, once its detections have grown by
+        a quarter."""
+        tc = self.config.tracking
+        head = tc.causal_judge_s or _JUDGE_STATIC_S
+        if not tc.causal_robust_still or ev.lived < head + FIXED_JUDGE_S:
+            return False
+        done = self._rigid_cache.get(track_id)
+        if done is not None and ev.hits < max(done[0] + _LEARNED_EVERY, 1.25 * done[0]):
+            return done[1]
+        rec = self._tracker.record(track_id)
+        if rec is None:
+            return False
+        det = track_detections(rec, self._tables, tc)
+        jitter = float(np.median(sampling_jitter(det.extent, rec.n_points)))
+        rigid = rigid_now(self._times[rec.frames], rec.positions, jitter, tc, head)
+        self._rigid_cache[track_id] = (ev.hits, rigid)
+        return rigid
+
     def _learned_factor(self, track_id: int, hits: int) -> float:
         """The learned re-weighing of a track's running evidence (:class:`TrackWeigher`), as in
         the refinement, from its detections so far; recomputed once its
@@ -781,7 +830,8 @@ class TrackEstimator:
         sc = own.get(track_id)
         if sc is None:  # a track that took the followed one's object over (``_hand_over``)
             ev = self._evidence[track_id]
-            sc = ev.score(self.config.tracking) * self._learned_factor(track_id, ev.hits)
+            rigid = self._rigid(track_id, ev)
+            sc = ev.score(self.config.tracking, rigid) * self._learned_factor(track_id, ev.hits)
         self._value = self._base + sc
 
     def _hand_over(
@@ -937,7 +987,12 @@ class TrackEstimator:
                 )
             stamps = np.asarray(self._stamps, dtype=np.int64)
             self._candidates = Candidates(
-                records, list(self._tables), t_s, stamps, self.background.view(onset=True)
+                records,
+                list(self._tables),
+                t_s,
+                stamps,
+                self.background.view(onset=True),
+                self.background.ground,
             )
         return self._candidates
 
@@ -1023,6 +1078,8 @@ def refine_candidates(
         origin, velocity, hold_s = ends[k_end]
         dt = t_s[f] - t_s[first if f < first else last] - offset_s
         pos[f], var[f] = extrapolate(origin, velocity, sm.cov[k_end], dt, q, tau_s, hold_s)
+    if cand.ground is not None and cfg.smoothing.ground_floor_m > 0:
+        _stop_at_ground(pos, first, last, cand.ground, cfg.smoothing.ground_floor_m)
     pos = apply_bias(pos, cfg.bias)
 
     estimates = []
@@ -1075,6 +1132,22 @@ def _extrapolation_ends(
             hold_s = min(cfg.straight_hold_factor * run.duration_s, cfg.straight_max_hold_s)
             ends[key] = (run.position, sign * run.velocity, hold_s)
     return ends
+
+
+def _stop_at_ground(
+    pos: NDArray[np.float64], first: int, last: int, ground: GroundModel, tolerance_m: float
+) -> None:
+    """Hold the extrapolation beyond the detections (frames before ``first``, after ``last``)
+    where it would go underground (``GroundModel.underground``): nothing flies through the
+    ground, so a drone extrapolated down into it had landed there, or had risen from there
+    (in place: ``pos`` (F,3) is changed)."""
+    for side in (np.arange(first - 1, -1, -1), np.arange(last + 1, len(pos))):
+        if len(side) == 0:
+            continue
+        below = np.flatnonzero(ground.underground(pos[side], tolerance_m))
+        if len(below):
+            k = int(below[0])
+            pos[side[k:]] = pos[side[k - 1]] if k > 0 else pos[first if side[0] < first else last]
 
 
 def _weigher(model: LearnedModel | None, cfg: TrackingConfig) -> TrackWeigher | None:

@@ -105,6 +105,7 @@ __all__ = [
     "extend_chain",
     "fixed_spread",
     "link_reach",
+    "rigid_now",
     "sampling_jitter",
     "score_tracks",
     "select_chain",
@@ -170,10 +171,15 @@ def fixed_spread(cfg: TrackingConfig, jitter_m: float) -> float:
     return max(cfg.fixed_spread_m, cfg.fixed_sampling_factor * jitter_m)
 
 
-def _is_fixed(t: NDArray[np.float64], pos: NDArray[np.float64], spread_m: float) -> bool:
+def _is_fixed(
+    t: NDArray[np.float64],
+    pos: NDArray[np.float64],
+    spread_m: float,
+    judge_s: float = FIXED_JUDGE_S,
+) -> bool:
     """Whether the running mean of ``FIXED_MEAN_HITS`` detections stays (90 %) within
-    ``spread_m`` of its median over at least ``FIXED_JUDGE_S``: rigid structure, not a drone."""
-    if spread_m <= 0 or len(t) < 2 * FIXED_MEAN_HITS or t[-1] - t[0] < FIXED_JUDGE_S:
+    ``spread_m`` of its median over at least ``judge_s``: rigid structure, not a drone."""
+    if spread_m <= 0 or len(t) < 2 * FIXED_MEAN_HITS or t[-1] - t[0] < judge_s:
         return False
     c = np.cumsum(np.vstack([np.zeros((1, 3)), pos]), axis=0)
     mean = (c[FIXED_MEAN_HITS:] - c[:-FIXED_MEAN_HITS]) / FIXED_MEAN_HITS
@@ -307,6 +313,24 @@ def _hand_factor(
     ):
         factor *= cfg.static_factor
     return factor * (1.0 + 0.5 * float(np.mean(det.both)))
+
+
+def rigid_now(
+    t: NDArray[np.float64],
+    pos: NDArray[np.float64],
+    jitter_m: float,
+    cfg: TrackingConfig,
+    head_s: float,
+) -> bool:
+    """Whether a track's detections ``pos`` (H,3) at times ``t`` (H,) after its first
+    ``head_s`` are rigidly fixed as the refinement judges (``_is_fixed`` over at least
+    ``FIXED_JUDGE_S``, the spread grown to the sampling jitter ``jitter_m``): a track's first
+    detections are its least sure (its gate is widest at birth: it may have begun on clutter
+    beside the object), and what is rigid from then on is structure. All the rest is judged,
+    not a recent window: a hovering drone wanders by decimetres over seconds, yet can keep
+    still to centimetres for one or two."""
+    after = t >= t[0] + head_s
+    return _is_fixed(t[after], pos[after], fixed_spread(cfg, jitter_m))
 
 
 def link_reach(

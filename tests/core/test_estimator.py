@@ -566,6 +566,35 @@ def test_the_causal_estimate_does_not_follow_a_still_object_before_it_is_judged(
     assert wrong(0.0) >= 5  # chosen at once: the sign is followed until judged
 
 
+@pytest.mark.parametrize("seed", [1, 2])
+def test_the_causal_estimate_judges_a_still_object_by_what_it_does_now(seed: int) -> None:
+    # the floating sign's track begins on something rising beside it (2 m in four scans),
+    # then stays rigid for good; alone, it is followed; the drone, drifting at 0.5 m/s,
+    # arrives at scan 20. The box around all the sign's running means stays 2 m tall, so
+    # judged by the box the sign never looks static and, followed and with more points, keeps
+    # beating the drone; judged by what it does after its first second, it is rigid structure
+    sign = np.array([3.0, 1.0, 2.5])
+
+    def drone(k: int) -> np.ndarray:
+        return np.array([8.0, -2.0 + 0.05 * k, 3.0])
+
+    def objects(k: int) -> list[tuple[tuple[float, ...], float]]:
+        rising = sign - [0.0, 0.0, 0.5 * max(4 - k, 0)]
+        return [(tuple(rising), 0.2)] + ([(tuple(drone(k)), 0.2)] if k >= 20 else [])
+
+    frames = _with_objects(seed, 60, objects)
+
+    def wrong_late(robust: bool) -> int:
+        tracking = {"causal_robust_still": robust, "prior_scorer": False}
+        _, result = estimate_sequence(frames, load_config(overrides={"tracking": tracking}))
+        late = list(enumerate(result.causal))[40:]
+        assert all(e.source != Source.FALLBACK for _, e in late)
+        return sum(float(np.linalg.norm(e.position - drone(k))) > 1.0 for k, e in late)
+
+    assert wrong_late(True) == 0
+    assert wrong_late(False) >= 10  # judged by the box, the sign is still followed
+
+
 def test_the_causal_estimate_waits_for_confirmation() -> None:
     # something large crosses the view for three scans right after the warm-up, then the drone
     # is alone: unconfirmed, the causal estimate reports the passer; confirmed, it waits (the
@@ -891,6 +920,52 @@ def test_a_track_whose_end_came_to_rest_there_is_held_even_where_it_could_have_g
     assert np.linalg.norm(always[-1] - last) > 2.0
     off, _ = _walk_then_unseen(foliage, onset={end_cell: after}, rest=False)
     assert np.linalg.norm(off[-1] - last) > 2.0
+
+
+def test_the_extrapolation_before_a_take_off_stops_at_the_ground() -> None:
+    # a drone sits on the ground 16 m out (learned as background from the start), then climbs
+    # away in a straight line at 3.6 m/s: carried back along that line, the refinement would
+    # put it metres underground before its first detection; held where the line meets the
+    # ground, it is within a metre of where it sat
+    def drone(k: int) -> np.ndarray:
+        t = max(k - 30, 0) * 0.1
+        return np.array([16.0 + 2.0 * t, 0.0, -1.2 + 3.0 * t])
+
+    frames = _with_objects(1, 60, lambda k: [(tuple(drone(k)), 0.3)])
+
+    def rms_on_the_ground(floor_m: float) -> float:
+        cfg = load_config(overrides={"smoothing": {"ground_floor_m": floor_m}})
+        _, result = estimate_sequence(frames, cfg)
+        return _rms(np.array([e.position - drone(k) for k, e in enumerate(result.estimates[:30])]))
+
+    assert rms_on_the_ground(0.5) < 1.0  # per coordinate
+    assert rms_on_the_ground(0.0) > 3.0  # carried underground
+
+
+def test_a_drone_lost_as_it_lands_is_not_carried_underground() -> None:
+    # a drone descends steeply (2.8 m/s) and is lost just above the ground (it landed where
+    # it returns nothing): carried on, the causal and the refined estimates sink metres into
+    # the ground; held where they would pass the floor (0.5 m below the ground seen there),
+    # neither goes below it by more than a scan's descent
+    from tests.core.scene import GROUND_Z
+
+    def drone(k: int) -> np.ndarray:
+        t = k * 0.1
+        return np.array([16.0 + t, 0.0, 8.0 - 2.8 * t])
+
+    frames = _with_objects(1, 60, lambda k: [(tuple(drone(k)), 0.3)] if k < 33 else [])
+
+    def lowest(floor_m: float) -> tuple[float, float]:
+        cfg = load_config(overrides={"smoothing": {"ground_floor_m": floor_m}})
+        _, result = estimate_sequence(frames, cfg)
+        return (
+            min(e.position[2] for e in result.causal if e.source != Source.FALLBACK),
+            min(e.position[2] for e in result.estimates),
+        )
+
+    held, carried = lowest(0.5), lowest(0.0)
+    assert min(held) > GROUND_Z - 0.5 - 0.3
+    assert max(carried) < GROUND_Z - 2.0
 
 
 def test_the_background_warm_up_is_no_evidence_that_a_drone_was_not_there() -> None:

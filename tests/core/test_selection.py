@@ -85,3 +85,27 @@ def test_a_rigid_object_is_fixed_within_its_sampling_jitter_and_a_hovering_drone
         wander = 0.1 * np.sin(np.outer(t, [1.3, 0.9, 2.1]) + phase)
         drones.append(_face_centroids(rng, still + [0.9, 0.2, 4.2] + wander, 0.3, 6))
     assert not any(_is_fixed(t, d, fixed_spread(tc, drone_jitter)) for d in drones)
+
+
+def test_rigid_now_forgives_a_tracks_head_and_not_a_hover_that_keeps_still_a_while() -> None:
+    # a sign seen for 4 s whose track began on clutter 1.5 m below it (its first four scans
+    # climb onto it): judged after its first second, rigid. A drone hovering for 6 s wanders by
+    # decimetres but keeps still to a centimetre in its last 1.5 s: judged on all but its first
+    # second (at least 2 s, as the refinement judges), not rigid; on a shorter window it would
+    # look rigid
+    from cldet.core.selection import _is_fixed, fixed_spread, rigid_now
+
+    rng = np.random.default_rng(1)
+    tc = load_config().tracking
+    t = np.arange(40) * 0.1
+    sign = np.tile([3.0, 1.0, 2.5], (40, 1)) + rng.normal(0.0, 0.003, (40, 3))
+    sign[:4, 2] -= [1.5, 1.1, 0.7, 0.3]
+    assert rigid_now(t, sign, 0.0, tc, 1.0)
+    assert not _is_fixed(t, sign, fixed_spread(tc, 0.0))  # all of it: the head spoils it
+    t6 = np.arange(60) * 0.1
+    settle = np.clip((4.4 - t6) / 4.4, 0.0, None)[:, None]  # wanders, then keeps still
+    drone = 5.0 + 0.15 * settle * np.sin(np.outer(t6, [1.3, 0.9, 2.1]))
+    drone = drone + rng.normal(0.0, 0.003, drone.shape)
+    assert not rigid_now(t6, drone, 0.0, tc, 1.0)
+    recent = t6 >= t6[-1] - 1.5
+    assert _is_fixed(t6[recent], drone[recent], fixed_spread(tc, 0.0), 1.0)
