@@ -550,14 +550,6 @@ class SmoothingConfig(BaseModel):
         " scene at that end could hide a drone (it stopped and was learned, or it came out of a"
         " hover), the position is held instead (0: off)",
     )
-    ground_floor_m: float = Field(
-        default=0.5,
-        ge=0,
-        description="the refinement's extrapolation beyond the detections is held where it would"
-        " pass this far below the local ground where that ground was seen (nothing flies"
-        " through it: a drone carried on down there had landed, or had risen from there);"
-        " 0: the extrapolation may go underground",
-    )
     unseen_confidence: float = Field(
         default=0.95,
         gt=0,

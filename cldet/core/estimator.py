@@ -62,8 +62,6 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    followed along its fit, as a lost straight track is, whatever a lost chain's evidence (a
    line is a coast, not a chosen track).
    A sparse fast pass, one return in a few scans, never makes a Kalman track to follow.
-   A predicted estimate that would lie underground is held at the last one
-   (``smoothing.ground_floor_m``: ``_above_ground``).
 
 ``refine``: the candidate tracks plus the constant-velocity lines of sparse fast movers
 (``cldet.core.lines``, track-before-detect); the drone's chain of tracks chosen by
@@ -74,8 +72,7 @@ forward-backward RTS smoother (``cldet.core.smoothing``) fills
 the gaps; before the first and after the last detection the track's own motion is
 extrapolated, its velocity decaying with time constant ``extrapolation_tau_s``, or held still
 where carrying it on contradicts what was not seen, or where the static scene shows it came
-to rest at its end (``_stop_unseen``), and held where it would go underground, as nothing
-flies through the ground (``_stop_at_ground``); the centroid
+to rest at its end (``_stop_unseen``); the centroid
 bias correction (``cldet.core.bias``) is applied last. Only when no candidate track exists at
 all is the configured fallback position used.
 
@@ -192,7 +189,6 @@ class Candidates:
     times_s: NDArray[np.float64]  # (F,) each frame's observation time, s from the first stamp
     stamps_ns: NDArray[np.int64]  # (F,)
     view: StaticView | None = None  # the static scene after the last frame (None: unknown)
-    ground: GroundModel | None = None  # the ground after the last frame (None: unknown)
 
 
 class Estimator(Protocol):
@@ -439,7 +435,7 @@ class TrackEstimator:
         self._forget_ended()
         keep = self._account(index, t_s, table, owner, labels, fg_idx, pts)
         bg.update(frame.stamp_ns, pts if keep is None else pts[keep])
-        estimate = self._above_ground(self._decide(index, frame.stamp_ns, owner))
+        estimate = self._decide(index, frame.stamp_ns, owner)
         self._causal.append(estimate)
         return FrameDetections(
             stamp_ns=frame.stamp_ns,
@@ -732,20 +728,6 @@ class TrackEstimator:
         pos = apply_bias(pos[None, :], self.config.bias)[0]
         return Estimate(stamp_ns, pos, Source.DETECTED if seen else Source.PREDICTED, n, sigma)
 
-    def _above_ground(self, estimate: Estimate) -> Estimate:
-        """A predicted causal estimate that would lie underground
-        (``smoothing.ground_floor_m``, as the refinement's ``_stop_at_ground``) is held at the
-        last estimate: nothing flies through the ground."""
-        floor = self.config.smoothing.ground_floor_m
-        if (
-            floor <= 0
-            or estimate.source != Source.PREDICTED
-            or not self._causal
-            or not self.background.ground.underground(estimate.position, floor)[0]
-        ):
-            return estimate
-        return replace(estimate, position=self._causal[-1].position.copy())
-
     def _rigid(self, track_id: int, ev: _Evidence) -> bool:
         """Whether a track is rigidly fixed by its detections after its first
         ``causal_judge_s`` (its head), seen ``FIXED_JUDGE_S`` since (``selection.rigid_now``;
@@ -987,12 +969,7 @@ class TrackEstimator:
                 )
             stamps = np.asarray(self._stamps, dtype=np.int64)
             self._candidates = Candidates(
-                records,
-                list(self._tables),
-                t_s,
-                stamps,
-                self.background.view(onset=True),
-                self.background.ground,
+                records, list(self._tables), t_s, stamps, self.background.view(onset=True)
             )
         return self._candidates
 
@@ -1078,8 +1055,6 @@ def refine_candidates(
         origin, velocity, hold_s = ends[k_end]
         dt = t_s[f] - t_s[first if f < first else last] - offset_s
         pos[f], var[f] = extrapolate(origin, velocity, sm.cov[k_end], dt, q, tau_s, hold_s)
-    if cand.ground is not None and cfg.smoothing.ground_floor_m > 0:
-        _stop_at_ground(pos, first, last, cand.ground, cfg.smoothing.ground_floor_m)
     pos = apply_bias(pos, cfg.bias)
 
     estimates = []
@@ -1132,22 +1107,6 @@ def _extrapolation_ends(
             hold_s = min(cfg.straight_hold_factor * run.duration_s, cfg.straight_max_hold_s)
             ends[key] = (run.position, sign * run.velocity, hold_s)
     return ends
-
-
-def _stop_at_ground(
-    pos: NDArray[np.float64], first: int, last: int, ground: GroundModel, tolerance_m: float
-) -> None:
-    """Hold the extrapolation beyond the detections (frames before ``first``, after ``last``)
-    where it would go underground (``GroundModel.underground``): nothing flies through the
-    ground, so a drone extrapolated down into it had landed there, or had risen from there
-    (in place: ``pos`` (F,3) is changed)."""
-    for side in (np.arange(first - 1, -1, -1), np.arange(last + 1, len(pos))):
-        if len(side) == 0:
-            continue
-        below = np.flatnonzero(ground.underground(pos[side], tolerance_m))
-        if len(below):
-            k = int(below[0])
-            pos[side[k:]] = pos[side[k - 1]] if k > 0 else pos[first if side[0] < first else last]
 
 
 def _weigher(model: LearnedModel | None, cfg: TrackingConfig) -> TrackWeigher | None:

@@ -43,7 +43,6 @@ _CELL_M = 2.0  # height-map cell, metres
 _HALF_EXTENT_M = 120.0  # the height map covers this far from the sensor, each way
 _ITERATIONS = 64
 _MAX_POINTS = 4000  # RANSAC subsample
-_SEEN_GROUND_M = 0.5  # a map cell whose lowest static return is no higher shows the ground
 
 
 GroundPlane = tuple[NDArray[np.float64], float]
@@ -188,24 +187,6 @@ class GroundModel:
         if self.normal is None:
             return np.full(len(p), np.nan)
         return p @ self.normal + self.offset
-
-    def underground(self, points: NDArray[np.floating], tolerance_m: float) -> NDArray[np.bool_]:
-        """(N,) each point lies more than ``tolerance_m`` below the local ground where that
-        ground was seen (nothing flies there): where the lowest static return around it lies
-        at the plane or below it (``_SEEN_GROUND_M``: the street beyond a roof's edge counts).
-        False where only higher static things were seen around it (a facade or a hedge whose
-        foot was hidden is no floor), where nothing static was seen (the plane alone is no
-        floor: beyond a roof's edge the street lies below it), outside the map, or before a
-        fit."""
-        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        out = np.zeros(len(p), dtype=bool)
-        if self.normal is None or len(p) == 0:
-            return out
-        i, j, inside = self._cells(p)
-        local = np.full(len(p), -np.inf)
-        local[inside] = self._map[i[inside], j[inside]]
-        local[~np.isfinite(local) | (local > _SEEN_GROUND_M)] = -np.inf
-        return np.asarray(self.plane_height(p) < local - tolerance_m)
 
     def height_above(self, points: NDArray[np.floating]) -> NDArray[np.float64]:
         """Height of each point (N,3) above the local ground, metres (NaN before a fit)."""

@@ -922,52 +922,6 @@ def test_a_track_whose_end_came_to_rest_there_is_held_even_where_it_could_have_g
     assert np.linalg.norm(off[-1] - last) > 2.0
 
 
-def test_the_extrapolation_before_a_take_off_stops_at_the_ground() -> None:
-    # a drone sits on the ground 16 m out (learned as background from the start), then climbs
-    # away in a straight line at 3.6 m/s: carried back along that line, the refinement would
-    # put it metres underground before its first detection; held where the line meets the
-    # ground, it is within a metre of where it sat
-    def drone(k: int) -> np.ndarray:
-        t = max(k - 30, 0) * 0.1
-        return np.array([16.0 + 2.0 * t, 0.0, -1.2 + 3.0 * t])
-
-    frames = _with_objects(1, 60, lambda k: [(tuple(drone(k)), 0.3)])
-
-    def rms_on_the_ground(floor_m: float) -> float:
-        cfg = load_config(overrides={"smoothing": {"ground_floor_m": floor_m}})
-        _, result = estimate_sequence(frames, cfg)
-        return _rms(np.array([e.position - drone(k) for k, e in enumerate(result.estimates[:30])]))
-
-    assert rms_on_the_ground(0.5) < 1.0  # per coordinate
-    assert rms_on_the_ground(0.0) > 3.0  # carried underground
-
-
-def test_a_drone_lost_as_it_lands_is_not_carried_underground() -> None:
-    # a drone descends steeply (2.8 m/s) and is lost just above the ground (it landed where
-    # it returns nothing): carried on, the causal and the refined estimates sink metres into
-    # the ground; held where they would pass the floor (0.5 m below the ground seen there),
-    # neither goes below it by more than a scan's descent
-    from tests.core.scene import GROUND_Z
-
-    def drone(k: int) -> np.ndarray:
-        t = k * 0.1
-        return np.array([16.0 + t, 0.0, 8.0 - 2.8 * t])
-
-    frames = _with_objects(1, 60, lambda k: [(tuple(drone(k)), 0.3)] if k < 33 else [])
-
-    def lowest(floor_m: float) -> tuple[float, float]:
-        cfg = load_config(overrides={"smoothing": {"ground_floor_m": floor_m}})
-        _, result = estimate_sequence(frames, cfg)
-        return (
-            min(e.position[2] for e in result.causal if e.source != Source.FALLBACK),
-            min(e.position[2] for e in result.estimates),
-        )
-
-    held, carried = lowest(0.5), lowest(0.0)
-    assert min(held) > GROUND_Z - 0.5 - 0.3
-    assert max(carried) < GROUND_Z - 2.0
-
-
 def test_the_background_warm_up_is_no_evidence_that_a_drone_was_not_there() -> None:
     # a drone first detected in scan 3 in a straight transit at 3.5 m/s: carried back, its path
     # lies in open view, and the scene at its first detection could hide a drone that hovered

@@ -59,22 +59,6 @@ def test_the_street_below_a_roof_edge_is_the_local_ground() -> None:
     np.testing.assert_allclose(h, [3.0, 1.5], atol=0.1)
 
 
-def test_underground_only_below_ground_that_was_seen() -> None:
-    # the roof and the street beyond its edge: a point under the roof is underground, one
-    # 5 m below the roof's plane but above the street is not (a drone descending past the
-    # edge), nor one where nothing static was seen (no floor is known there)
-    rng = np.random.default_rng(3)
-    roof = np.stack([rng.uniform(-6, 6, 3000), rng.uniform(-6, 6, 3000), np.full(3000, -1.0)], 1)
-    street = np.stack([rng.uniform(10, 30, 600), rng.uniform(-20, 20, 600), np.full(600, -11.0)], 1)
-    model = GroundModel()
-    assert not model.underground(np.zeros((1, 3)), 0.5).any()  # before a fit: unknown
-    assert model.fit(np.concatenate([roof, street]))
-    probes = np.array(
-        [[2.0, 2.0, -2.0], [2.0, 2.0, -1.2], [20.0, 0.0, -6.0], [20.0, 0.0, -12.0], [-60, 0, -9]]
-    )
-    assert model.underground(probes, 0.5).tolist() == [True, False, False, True, False]
-
-
 def test_no_plane_from_points_above_the_sensor_only() -> None:
     rng = np.random.default_rng(4)
     model = GroundModel()
