@@ -85,9 +85,9 @@ FALLBACK (no track at all). ``sigma_m`` is the per-axis 1-sigma position uncerta
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Protocol
+from typing import Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -97,7 +97,12 @@ from cldet.config import CldetConfig, SmoothingConfig, TrackingConfig
 from cldet.core.background import FOREGROUND, MARGIN, BackgroundModel, StaticView
 from cldet.core.bias import apply_bias
 from cldet.core.clustering import cluster_points, summarize_clusters
-from cldet.core.features import FEATURE_NAMES, track_detections, track_features
+from cldet.core.features import (
+    FEATURE_NAMES,
+    TrackDetections,
+    track_detections,
+    track_features,
+)
 from cldet.core.frames import valid_points
 from cldet.core.ground import GroundModel
 from cldet.core.lines import find_lines
@@ -146,7 +151,8 @@ __all__ = [
 _LOST_AFTER_S = 0.5  # a gap without detection longer than this is reported as lost/reacquired
 _SWITCH_RATIO = 1.3  # causal choice: a challenger must have this much more evidence
 _JUDGE_STATIC_S = 1.0  # causal, without causal_judge_s: a track is judged static after this
-_LEARNED_EVERY = 5  # causal: a track's learned factor is recomputed after this many more hits
+_LEARNED_EVERY = 5  # causal: a track's learned factor and rigidity are redone after this many hits
+_T = TypeVar("_T")
 
 
 @dataclass(frozen=True)
@@ -728,47 +734,55 @@ class TrackEstimator:
         pos = apply_bias(pos[None, :], self.config.bias)[0]
         return Estimate(stamp_ns, pos, Source.DETECTED if seen else Source.PREDICTED, n, sigma)
 
-    def _rigid(self, track_id: int, ev: _Evidence) -> bool:
-        """Whether a track is rigidly fixed by its detections after its first
-        ``causal_judge_s`` (its head), seen ``FIXED_JUDGE_S`` since (``selection.rigid_now``;
-        ``tracking.causal_robust_still``: the box around
-        all its running means, which one stray early detection widens for good, is not the
-        only judge). Recomputed as ``_learned_factor`` is, once its detections have grown by
-        a quarter."""
-        tc = self.config.tracking
-        head = tc.causal_judge_s or _JUDGE_STATIC_S
-        if not tc.causal_robust_still or ev.lived < head + FIXED_JUDGE_S:
-            return False
-        done = self._rigid_cache.get(track_id)
-        if done is not None and ev.hits < max(done[0] + _LEARNED_EVERY, 1.25 * done[0]):
-            return done[1]
-        rec = self._tracker.record(track_id)
-        if rec is None:
-            return False
-        det = track_detections(rec, self._tables, tc)
-        jitter = float(np.median(sampling_jitter(det.extent, rec.n_points)))
-        rigid = rigid_now(self._times[rec.frames], rec.positions, jitter, tc, head)
-        self._rigid_cache[track_id] = (ev.hits, rigid)
-        return rigid
-
-    def _learned_factor(self, track_id: int, hits: int) -> float:
-        """The learned re-weighing of a track's running evidence (:class:`TrackWeigher`), as in
-        the refinement, from its detections so far; recomputed once its
-        detections have grown by a quarter (at least ``_LEARNED_EVERY``), so that a long
-        track costs O(H log H) in all."""
-        if self._weigher is None:
-            return 1.0
-        done = self._learned.get(track_id)
+    def _per_track(
+        self,
+        cache: dict[int, tuple[int, _T]],
+        track_id: int,
+        hits: int,
+        judge: Callable[[TrackRecord, TrackDetections], _T],
+        default: _T,
+    ) -> _T:
+        """A judgement of a track from its detections so far, kept in ``cache`` and made
+        again once its detections have grown by a quarter (at least ``_LEARNED_EVERY``), so
+        that a long track costs O(H log H) in all; ``default`` where it has no record."""
+        done = cache.get(track_id)
         if done is not None and hits < max(done[0] + _LEARNED_EVERY, 1.25 * done[0]):
             return done[1]
         rec = self._tracker.record(track_id)
         if rec is None:
+            return default
+        value = judge(rec, track_detections(rec, self._tables, self.config.tracking))
+        cache[track_id] = (hits, value)
+        return value
+
+    def _rigid(self, track_id: int, ev: _Evidence) -> bool:
+        """Whether a track is rigidly fixed by its detections after its first
+        ``causal_judge_s`` (its head), seen ``FIXED_JUDGE_S`` since (``selection.rigid_now``;
+        ``tracking.causal_robust_still``: the box around all its running means, which one
+        stray early detection widens for good, is not the only judge); see ``_per_track``."""
+        tc = self.config.tracking
+        head = tc.causal_judge_s or _JUDGE_STATIC_S
+        if not tc.causal_robust_still or ev.lived < head + FIXED_JUDGE_S:
+            return False
+
+        def rigid(rec: TrackRecord, det: TrackDetections) -> bool:
+            jitter = float(np.median(sampling_jitter(det.extent, rec.n_points)))
+            return rigid_now(self._times[rec.frames], rec.positions, jitter, tc, head)
+
+        return self._per_track(self._rigid_cache, track_id, ev.hits, rigid, False)
+
+    def _learned_factor(self, track_id: int, hits: int) -> float:
+        """The learned re-weighing of a track's running evidence (:class:`TrackWeigher`), as in
+        the refinement, from its detections so far (see ``_per_track``)."""
+        weigher = self._weigher
+        if weigher is None:
             return 1.0
-        det = track_detections(rec, self._tables, self.config.tracking)
-        features = track_features(rec, det, self._times[rec.frames])
-        factor = float(self._weigher(features[None, :])[0])
-        self._learned[track_id] = (hits, factor)
-        return factor
+
+        def learned(rec: TrackRecord, det: TrackDetections) -> float:
+            features = track_features(rec, det, self._times[rec.frames])
+            return float(weigher(features[None, :])[0])
+
+        return self._per_track(self._learned, track_id, hits, learned, 1.0)
 
     def _lose(self, track_id: int) -> None:
         """The followed track has ended: its chain's evidence keeps competing

@@ -171,15 +171,10 @@ def fixed_spread(cfg: TrackingConfig, jitter_m: float) -> float:
     return max(cfg.fixed_spread_m, cfg.fixed_sampling_factor * jitter_m)
 
 
-def _is_fixed(
-    t: NDArray[np.float64],
-    pos: NDArray[np.float64],
-    spread_m: float,
-    judge_s: float = FIXED_JUDGE_S,
-) -> bool:
+def _is_fixed(t: NDArray[np.float64], pos: NDArray[np.float64], spread_m: float) -> bool:
     """Whether the running mean of ``FIXED_MEAN_HITS`` detections stays (90 %) within
-    ``spread_m`` of its median over at least ``judge_s``: rigid structure, not a drone."""
-    if spread_m <= 0 or len(t) < 2 * FIXED_MEAN_HITS or t[-1] - t[0] < judge_s:
+    ``spread_m`` of its median over at least ``FIXED_JUDGE_S``: rigid structure, not a drone."""
+    if spread_m <= 0 or len(t) < 2 * FIXED_MEAN_HITS or t[-1] - t[0] < FIXED_JUDGE_S:
         return False
     c = np.cumsum(np.vstack([np.zeros((1, 3)), pos]), axis=0)
     mean = (c[FIXED_MEAN_HITS:] - c[:-FIXED_MEAN_HITS]) / FIXED_MEAN_HITS

@@ -90,8 +90,8 @@ def test_a_rigid_object_is_fixed_within_its_sampling_jitter_and_a_hovering_drone
 def test_rigid_now_forgives_a_tracks_head_and_not_a_hover_that_keeps_still_a_while() -> None:
     # a sign seen for 4 s whose track began on clutter 1.5 m below it (its first four scans
     # climb onto it): judged after its first second, rigid. A drone hovering for 6 s wanders by
-    # decimetres but keeps still to a centimetre in its last 1.5 s: judged on all but its first
-    # second (at least 2 s, as the refinement judges), not rigid; on a shorter window it would
+    # decimetres for 3.8 s, then keeps still to a centimetre: judged on all but its first
+    # second, not rigid; judged on its still part alone (a window of its last 2.2 s) it would
     # look rigid
     from cldet.core.selection import _is_fixed, fixed_spread, rigid_now
 
@@ -103,9 +103,8 @@ def test_rigid_now_forgives_a_tracks_head_and_not_a_hover_that_keeps_still_a_whi
     assert rigid_now(t, sign, 0.0, tc, 1.0)
     assert not _is_fixed(t, sign, fixed_spread(tc, 0.0))  # all of it: the head spoils it
     t6 = np.arange(60) * 0.1
-    settle = np.clip((4.4 - t6) / 4.4, 0.0, None)[:, None]  # wanders, then keeps still
+    settle = np.clip((3.8 - t6) / 3.8, 0.0, None)[:, None]  # wanders, then keeps still
     drone = 5.0 + 0.15 * settle * np.sin(np.outer(t6, [1.3, 0.9, 2.1]))
     drone = drone + rng.normal(0.0, 0.003, drone.shape)
     assert not rigid_now(t6, drone, 0.0, tc, 1.0)
-    recent = t6 >= t6[-1] - 1.5
-    assert _is_fixed(t6[recent], drone[recent], fixed_spread(tc, 0.0), 1.0)
+    assert rigid_now(t6, drone, 0.0, tc, 3.8)
