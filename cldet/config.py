@@ -439,6 +439,14 @@ class TrackingConfig(BaseModel):
         " stray early detection (the track begun on clutter beside a sign) widens for good;"
         " false: the box",
     )
+    causal_still_waits: bool = Field(
+        default=True,
+        description="causal: a track that has kept still since its birth (its detections"
+        " within a box of twice static_spread_m) is chosen only once its rigidity can be"
+        " judged (causal_judge_s plus 2 s): a sign or lamp head overhead that the background"
+        " keeps as foreground looks like a drone hovering until then, and its dozens of returns"
+        " a scan outweigh a far drone's one or two (false: chosen after causal_judge_s)",
+    )
     line_search: bool = Field(
         default=True,
         description="track-before-detect for sparse fast movers: constant-velocity lines through"
@@ -505,6 +513,13 @@ class SmoothingConfig(BaseModel):
         gt=0,
         description="beyond the detections the velocity decays with this time constant (after"
         " holding as long as the straight run that ends, or starts, the track)",
+    )
+    max_decel_mps2: float = Field(
+        default=6.0,
+        ge=0,
+        description="beyond the detections the velocity decays no faster than a multirotor"
+        " brakes, about g tan(tilt limit), 6 m/s^2 for 31 deg: the decay's time constant grows"
+        " to speed / this where that is longer than extrapolation_tau_s (0: off)",
     )
     straight_rms_m: float = Field(
         default=0.4,

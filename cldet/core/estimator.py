@@ -70,7 +70,8 @@ packaged prior of ``cldet.core.prior`` and by a model's own scorer where one is 
 on at its ends by weak tracks that touch it (``selection.extend_chain``); a
 forward-backward RTS smoother (``cldet.core.smoothing``) fills
 the gaps; before the first and after the last detection the track's own motion is
-extrapolated, its velocity decaying with time constant ``extrapolation_tau_s``, or held still
+extrapolated, its velocity decaying with time constant ``extrapolation_tau_s`` (no faster than a
+multirotor brakes: ``max_decel_mps2``), or held still
 where carrying it on contradicts what was not seen, or where the static scene shows it came
 to rest at its end (``_stop_unseen``); the centroid
 bias correction (``cldet.core.bias``) is applied last. Only when no candidate track exists at
@@ -119,12 +120,13 @@ from cldet.core.selection import (
     extend_chain,
     fixed_spread,
     link_reach,
+    may_be_rigid,
     rigid_now,
     sampling_jitter,
     score_tracks,
     select_chain,
 )
-from cldet.core.smoothing import extrapolate, rts_smooth, straight_run
+from cldet.core.smoothing import decay_tau, extrapolate, rts_smooth, straight_run
 from cldet.core.tracking import (
     ActiveTracks,
     CandidateTracker,
@@ -367,6 +369,7 @@ class TrackEstimator:
         self._weigher = _weigher(model, config.tracking)
         self._learned: dict[int, tuple[int, float]] = {}
         self._rigid_cache: dict[int, tuple[int, bool]] = {}  # causal_robust_still: (hits, rigid)
+        self._maybe_rigid_cache: dict[int, tuple[int, bool]] = {}  # causal_still_waits
         self._choice: int | None = None  # causal: the track followed
         # causal (``tracking.causal_keep_lost``): the chain lost, the evidence the followed
         # track carries on from a lost chain it continues, and the followed chain's evidence
@@ -463,6 +466,9 @@ class TrackEstimator:
             self._evidence = {k: v for k, v in self._evidence.items() if k in alive}
             self._learned = {k: v for k, v in self._learned.items() if k in alive}
             self._rigid_cache = {k: v for k, v in self._rigid_cache.items() if k in alive}
+            self._maybe_rigid_cache = {
+                k: v for k, v in self._maybe_rigid_cache.items() if k in alive
+            }
 
     def _heights(self, clusters: tuple[Cluster, ...]) -> NDArray[np.float64]:
         """(K,) each cluster's lowest point above the local ground, 0 where it may continue."""
@@ -657,7 +663,7 @@ class TrackEstimator:
             if ev is None:
                 continue
             row[tid] = i
-            if tid != self._choice and ev.lived < tc.causal_judge_s:
+            if tid != self._choice and ev.lived < self._judged_after(tid, ev):
                 continue  # not chosen before it can be judged static or fixed
             h = ev.score(tc, self._rigid(tid, ev))
             if tid == self._choice:
@@ -754,6 +760,27 @@ class TrackEstimator:
         value = judge(rec, track_detections(rec, self._tables, self.config.tracking))
         cache[track_id] = (hits, value)
         return value
+
+    def _judged_after(self, track_id: int, ev: _Evidence) -> float:
+        """How long a track must have lived before it may be chosen: ``causal_judge_s``; with
+        ``tracking.causal_still_waits``, one whose detections so far look rigidly fixed
+        (``selection.may_be_rigid``), until that can be judged (``_rigid``: its head plus
+        ``FIXED_JUDGE_S``)."""
+        tc = self.config.tracking
+        head = tc.causal_judge_s or _JUDGE_STATIC_S
+        if (
+            not tc.causal_still_waits
+            or ev.lived < tc.causal_judge_s
+            or ev.lived >= head + FIXED_JUDGE_S
+        ):
+            return tc.causal_judge_s
+
+        def maybe(rec: TrackRecord, det: TrackDetections) -> bool:
+            jitter = float(np.median(sampling_jitter(det.extent, rec.n_points)))
+            return may_be_rigid(rec.positions, jitter, tc)
+
+        waits = self._per_track(self._maybe_rigid_cache, track_id, ev.hits, maybe, False)
+        return head + FIXED_JUDGE_S if waits else tc.causal_judge_s
 
     def _rigid(self, track_id: int, ev: _Evidence) -> bool:
         """Whether a track is rigidly fixed by its detections after its first
@@ -947,10 +974,10 @@ class TrackEstimator:
         ``hold_s`` and then decaying as the refinement's extrapolation does."""
         sc = self.config.smoothing
         dt = float(self._times[index]) - self._offset_s - c.t_s  # to the stamp's time
+        tau_s = decay_tau(c.velocity, sc.extrapolation_tau_s, sc.max_decel_mps2)
         pos, var = extrapolate(
-            c.origin, c.velocity, np.zeros((2, 2)), dt, sc.accel_psd, sc.extrapolation_tau_s,
-            c.hold_s,
-        )  # fmt: skip
+            c.origin, c.velocity, np.zeros((2, 2)), dt, sc.accel_psd, tau_s, c.hold_s
+        )
         pos = apply_bias(pos[None, :], self.config.bias)[0]
         sigma = float(np.hypot(c.sigma_m, np.sqrt(max(var, 0.0))))
         return Estimate(stamp_ns, pos, Source.PREDICTED, 0, sigma)
@@ -1049,7 +1076,7 @@ def refine_candidates(
     # the smoother's states are at the points' time: move them back to the stamps
     pos[seg] = sm.position - sm.velocity * offset_s
     var[seg] = sm.pos_var
-    q, tau_s = cfg.smoothing.accel_psd, cfg.smoothing.extrapolation_tau_s
+    q = cfg.smoothing.accel_psd
     scan_s = float(np.median(np.diff(t_s))) if n > 1 else 0.0  # a scan lasts a frame period
     ends = _extrapolation_ends(t_s[idx], z[idx], sm.position, sm.velocity, scan_s, cfg.smoothing)
     if cand.view is not None and cfg.smoothing.unseen_check_s > 0:
@@ -1068,6 +1095,7 @@ def refine_candidates(
         k_end = 0 if f < first else -1
         origin, velocity, hold_s = ends[k_end]
         dt = t_s[f] - t_s[first if f < first else last] - offset_s
+        tau_s = decay_tau(velocity, cfg.smoothing.extrapolation_tau_s, cfg.smoothing.max_decel_mps2)
         pos[f], var[f] = extrapolate(origin, velocity, sm.cov[k_end], dt, q, tau_s, hold_s)
     pos = apply_bias(pos, cfg.bias)
 
@@ -1182,7 +1210,10 @@ def _stop_unseen(
         if rate <= 0.0:
             continue
         dt = t_s[beyond] - t_s[end]
-        tau, still = cfg.extrapolation_tau_s, np.zeros((2, 2))
+        tau, still = (
+            decay_tau(velocity, cfg.extrapolation_tau_s, cfg.max_decel_mps2),
+            np.zeros((2, 2)),
+        )
         path = np.array([extrapolate(origin, velocity, still, d, 0.0, tau, hold_s)[0] for d in dt])
         r_end = float(np.linalg.norm(origin))
         r = np.maximum(np.linalg.norm(path, axis=1), 1e-3)

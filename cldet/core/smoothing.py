@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 __all__ = [
     "KalmanCV",
     "SmoothedTrack",
+    "decay_tau",
     "extrapolate",
     "process_noise",
     "rts_smooth",
@@ -183,6 +184,17 @@ def extrapolate(
     p = np.asarray(position, dtype=np.float64) + np.asarray(velocity, dtype=np.float64) * eff
     var = float((F @ np.asarray(cov) @ F.T + process_noise(a, q))[0, 0])
     return p, var
+
+
+def decay_tau(velocity: NDArray[np.floating], tau_s: float, max_decel_mps2: float) -> float:
+    """The time constant of the velocity's decay beyond a track's end (``extrapolate``) for a
+    track leaving at ``velocity``: ``tau_s``, or longer where that decay would brake faster
+    than ``max_decel_mps2`` (0: no bound). The decay starts at speed / tau; a multirotor brakes
+    by tilting against its motion, at most about g tan(tilt limit), 4-7 m/s^2 for 25-35 deg:
+    a drone seen at 20 m/s cannot have stopped 1.5 s later, as tau 1.5 s would have it."""
+    if max_decel_mps2 <= 0:
+        return tau_s
+    return max(tau_s, float(np.linalg.norm(velocity)) / max_decel_mps2)
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from cldet.config import SmoothingConfig
-from cldet.core.smoothing import KalmanCV, extrapolate, rts_smooth, straight_run
+from cldet.core.smoothing import (
+    KalmanCV,
+    decay_tau,
+    extrapolate,
+    rts_smooth,
+    straight_run,
+)
 
 _MIN_POINTS = SmoothingConfig().straight_min_points  # the configuration's default
 
@@ -122,3 +128,27 @@ def test_straight_run_allows_for_the_smear_of_a_scan() -> None:
     # path than the last (smeared) detection does, so extrapolation starts from the line
     end = t[-1] * v
     assert np.linalg.norm(run.position - end) < 0.2 < np.linalg.norm(z[-1] - end)
+
+
+@pytest.mark.parametrize("speed", [0.5, 3.0, 10.0, 20.0, 30.0])
+def test_the_extrapolated_velocity_decays_no_faster_than_a_drone_brakes(speed: float) -> None:
+    # whatever the speed, the decayed extrapolation never stops short of where a multirotor
+    # braking as hard as it can (6 m/s^2) would still be: v t - a t^2 / 2 until it stops
+    a, tau = 6.0, 1.5
+    v = np.array([speed, 0.0, 0.0])
+    t = np.linspace(0.0, 10.0, 101)
+    braking = np.where(t < speed / a, speed * t - 0.5 * a * t**2, speed**2 / (2 * a))
+
+    def travelled(max_decel: float) -> np.ndarray:
+        tau_s = decay_tau(v, tau, max_decel)
+        return np.array(
+            [extrapolate(np.zeros(3), v, np.zeros((2, 2)), d, 0.0, tau_s)[0][0] for d in t]
+        )
+
+    assert np.all(travelled(a) >= braking - 1e-9)
+    assert decay_tau(v, tau, a) == max(tau, speed / a)
+    assert decay_tau(v, tau, 0.0) == tau  # off
+    if speed / a > tau:  # the bare 1.5 s decay stops a fast drone sooner than it can brake
+        assert np.any(travelled(0.0) < braking - 1e-6)
+    if speed >= 20.0:  # by metres: 3.3 m at 20 m/s, 30 m at 30 m/s
+        assert np.min(travelled(0.0) - braking) < -3.0
