@@ -39,7 +39,8 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    ``tracking.causal_judge_s``, from when on it is judged static or rigidly fixed: for its
    first second a still object, say a sign overhead, looks like a drone that just arrived;
    rigid also by its detections after its first second alone, ``tracking.causal_robust_still``:
-   ``_rigid``);
+   ``_rigid``; one whose running means have kept within the fixed spread so far is not chosen
+   until its rigidity can be judged, ``tracking.causal_still_waits``: ``_judged_after``);
    the estimate is that track's filtered state moved back from the points' time to the stamp.
    In a frame the followed track misses, the estimate follows the line of the straight run
    that ends its detections, where one does (``smoothing.causal_straight_coast``: the filter
