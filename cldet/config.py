@@ -439,15 +439,6 @@ class TrackingConfig(BaseModel):
         " stray early detection (the track begun on clutter beside a sign) widens for good;"
         " false: the box",
     )
-    causal_still_waits: bool = Field(
-        default=True,
-        description="causal: a track whose running means of five detections (after its first"
-        " five, or its last six while it has fewer) have kept within the fixed spread"
-        " (selection.may_be_rigid) is chosen only once its rigidity can be judged, 2 s after"
-        " its first causal_judge_s: a sign or lamp head overhead that the background keeps as"
-        " foreground looks like a drone hovering until then, and its dozens of returns a scan"
-        " outweigh a far drone's one or two (false: chosen after causal_judge_s)",
-    )
     line_search: bool = Field(
         default=True,
         description="track-before-detect for sparse fast movers: constant-velocity lines through"

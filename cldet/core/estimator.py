@@ -39,8 +39,7 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    ``tracking.causal_judge_s``, from when on it is judged static or rigidly fixed: for its
    first second a still object, say a sign overhead, looks like a drone that just arrived;
    rigid also by its detections after its first second alone, ``tracking.causal_robust_still``:
-   ``_rigid``; one whose running means have kept within the fixed spread so far is not chosen
-   until its rigidity can be judged, ``tracking.causal_still_waits``: ``_judged_after``);
+   ``_rigid``);
    the estimate is that track's filtered state moved back from the points' time to the stamp.
    In a frame the followed track misses, the estimate follows the line of the straight run
    that ends its detections, where one does (``smoothing.causal_straight_coast``: the filter
@@ -121,7 +120,6 @@ from cldet.core.selection import (
     extend_chain,
     fixed_spread,
     link_reach,
-    may_be_rigid,
     rigid_now,
     sampling_jitter,
     score_tracks,
@@ -370,7 +368,6 @@ class TrackEstimator:
         self._weigher = _weigher(model, config.tracking)
         self._learned: dict[int, tuple[int, float]] = {}
         self._rigid_cache: dict[int, tuple[int, bool]] = {}  # causal_robust_still: (hits, rigid)
-        self._maybe_rigid_cache: dict[int, tuple[int, bool]] = {}  # causal_still_waits
         self._choice: int | None = None  # causal: the track followed
         # causal (``tracking.causal_keep_lost``): the chain lost, the evidence the followed
         # track carries on from a lost chain it continues, and the followed chain's evidence
@@ -467,9 +464,6 @@ class TrackEstimator:
             self._evidence = {k: v for k, v in self._evidence.items() if k in alive}
             self._learned = {k: v for k, v in self._learned.items() if k in alive}
             self._rigid_cache = {k: v for k, v in self._rigid_cache.items() if k in alive}
-            self._maybe_rigid_cache = {
-                k: v for k, v in self._maybe_rigid_cache.items() if k in alive
-            }
 
     def _heights(self, clusters: tuple[Cluster, ...]) -> NDArray[np.float64]:
         """(K,) each cluster's lowest point above the local ground, 0 where it may continue."""
@@ -664,7 +658,7 @@ class TrackEstimator:
             if ev is None:
                 continue
             row[tid] = i
-            if tid != self._choice and ev.lived < self._judged_after(tid, ev):
+            if tid != self._choice and ev.lived < tc.causal_judge_s:
                 continue  # not chosen before it can be judged static or fixed
             h = ev.score(tc, self._rigid(tid, ev))
             if tid == self._choice:
@@ -761,27 +755,6 @@ class TrackEstimator:
         value = judge(rec, track_detections(rec, self._tables, self.config.tracking))
         cache[track_id] = (hits, value)
         return value
-
-    def _judged_after(self, track_id: int, ev: _Evidence) -> float:
-        """How long a track must have lived before it may be chosen: ``causal_judge_s``; with
-        ``tracking.causal_still_waits``, one whose detections so far look rigidly fixed
-        (``selection.may_be_rigid``), until that can be judged (``_rigid``: its head plus
-        ``FIXED_JUDGE_S``)."""
-        tc = self.config.tracking
-        head = tc.causal_judge_s or _JUDGE_STATIC_S
-        if (
-            not tc.causal_still_waits
-            or ev.lived < tc.causal_judge_s
-            or ev.lived >= head + FIXED_JUDGE_S
-        ):
-            return tc.causal_judge_s
-
-        def maybe(rec: TrackRecord, det: TrackDetections) -> bool:
-            jitter = float(np.median(sampling_jitter(det.extent, rec.n_points)))
-            return may_be_rigid(rec.positions, jitter, tc)
-
-        waits = self._per_track(self._maybe_rigid_cache, track_id, ev.hits, maybe, False)
-        return head + FIXED_JUDGE_S if waits else tc.causal_judge_s
 
     def _rigid(self, track_id: int, ev: _Evidence) -> bool:
         """Whether a track is rigidly fixed by its detections after its first

@@ -105,7 +105,6 @@ __all__ = [
     "extend_chain",
     "fixed_spread",
     "link_reach",
-    "may_be_rigid",
     "rigid_now",
     "sampling_jitter",
     "score_tracks",
@@ -172,20 +171,15 @@ def fixed_spread(cfg: TrackingConfig, jitter_m: float) -> float:
     return max(cfg.fixed_spread_m, cfg.fixed_sampling_factor * jitter_m)
 
 
-def _mean_spread(pos: NDArray[np.float64]) -> float:
-    """How far the running mean of ``FIXED_MEAN_HITS`` detections ``pos`` (H,3), H at least
-    that, strays from its median: the 90th percentile of the distances, metres."""
-    c = np.cumsum(np.vstack([np.zeros((1, 3)), pos]), axis=0)
-    mean = (c[FIXED_MEAN_HITS:] - c[:-FIXED_MEAN_HITS]) / FIXED_MEAN_HITS
-    return _p90(np.linalg.norm(mean - np.median(mean, axis=0), axis=1))
-
-
 def _is_fixed(t: NDArray[np.float64], pos: NDArray[np.float64], spread_m: float) -> bool:
     """Whether the running mean of ``FIXED_MEAN_HITS`` detections stays (90 %) within
     ``spread_m`` of its median over at least ``FIXED_JUDGE_S``: rigid structure, not a drone."""
     if spread_m <= 0 or len(t) < 2 * FIXED_MEAN_HITS or t[-1] - t[0] < FIXED_JUDGE_S:
         return False
-    return _mean_spread(pos) < spread_m
+    c = np.cumsum(np.vstack([np.zeros((1, 3)), pos]), axis=0)
+    mean = (c[FIXED_MEAN_HITS:] - c[:-FIXED_MEAN_HITS]) / FIXED_MEAN_HITS
+    dist = np.linalg.norm(mean - np.median(mean, axis=0), axis=1)
+    return _p90(dist) < spread_m
 
 
 def detection_weights(
@@ -332,22 +326,6 @@ def rigid_now(
     still to centimetres for one or two."""
     after = t >= t[0] + head_s
     return _is_fixed(t[after], pos[after], fixed_spread(cfg, jitter_m))
-
-
-def may_be_rigid(pos: NDArray[np.float64], jitter_m: float, cfg: TrackingConfig) -> bool:
-    """Whether a young track's detections ``pos`` (H,3) so far look rigidly fixed, before
-    ``rigid_now`` can judge it: the running means of its detections after its first
-    ``FIXED_MEAN_HITS`` (a track's first detections are its least sure: it may have begun on
-    clutter beside the object), or of its last ``FIXED_MEAN_HITS + 1`` while it has too few
-    for two means after them, within the fixed spread of their median. A far or sparse
-    object's running mean scatters by decimetres and a moving one's moves: neither shows it;
-    a sign's stays put to centimetres."""
-    spread = fixed_spread(cfg, jitter_m)
-    n = FIXED_MEAN_HITS + 1  # two running means
-    recent = pos[FIXED_MEAN_HITS:] if len(pos) >= FIXED_MEAN_HITS + n else pos[-n:]
-    if spread <= 0 or len(recent) < n:
-        return False
-    return _mean_spread(recent) < spread
 
 
 def link_reach(
