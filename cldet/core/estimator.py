@@ -1065,12 +1065,15 @@ def refine_candidates(
         # nothing is foreground during the background's warm-up: no evidence either way
         blind = stamps < stamps[0] + int(round(cfg.background.bin_s * 1e9))
         ends = _stop_unseen(ends, t_s, have, blind, cand.view, came_out, stayed, cfg.smoothing)
+    sc = cfg.smoothing
+    taus = {
+        k: decay_tau(v, sc.extrapolation_tau_s, sc.max_decel_mps2) for k, (_, v, _) in ends.items()
+    }
     for f in list(range(first)) + list(range(last + 1, n)):
         k_end = 0 if f < first else -1
         origin, velocity, hold_s = ends[k_end]
         dt = t_s[f] - t_s[first if f < first else last] - offset_s
-        tau_s = decay_tau(velocity, cfg.smoothing.extrapolation_tau_s, cfg.smoothing.max_decel_mps2)
-        pos[f], var[f] = extrapolate(origin, velocity, sm.cov[k_end], dt, q, tau_s, hold_s)
+        pos[f], var[f] = extrapolate(origin, velocity, sm.cov[k_end], dt, q, taus[k_end], hold_s)
     pos = apply_bias(pos, cfg.bias)
 
     estimates = []
