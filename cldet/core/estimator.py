@@ -126,6 +126,7 @@ from cldet.core.selection import (
     select_chain,
 )
 from cldet.core.smoothing import decay_tau, extrapolate, rts_smooth, straight_run
+from cldet.core.stats import median
 from cldet.core.tracking import (
     ActiveTracks,
     CandidateTracker,
@@ -767,7 +768,7 @@ class TrackEstimator:
             return False
 
         def rigid(rec: TrackRecord, det: TrackDetections) -> bool:
-            jitter = float(np.median(sampling_jitter(det.extent, rec.n_points)))
+            jitter = median(sampling_jitter(det.extent, rec.n_points))
             return rigid_now(self._times[rec.frames], rec.positions, jitter, tc, head)
 
         return self._per_track(self._rigid_cache, track_id, ev.hits, rigid, False)

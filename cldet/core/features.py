@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cldet.config import TrackingConfig
+from cldet.core.stats import column_medians, median, nanmedian, nanpercentile, percentile
 from cldet.core.tracking import ClusterTable, TrackRecord, constant_velocity_fit, cross_section
 
 __all__ = [
@@ -141,16 +142,6 @@ def track_detections(
     return TrackDetections(extent, size, height, n_mid, n_avia, cross, crowd, mid_z_ss)
 
 
-def _nanmedian(x: F64) -> float:
-    x = x[np.isfinite(x)]
-    return float(np.median(x)) if len(x) else float("nan")
-
-
-def _nanpercentile(x: F64, q: float) -> float:
-    x = x[np.isfinite(x)]
-    return float(np.percentile(x, q)) if len(x) else float("nan")
-
-
 def track_features(
     rec: TrackRecord, det: TrackDetections, times_s: F64, upto: int | None = None
 ) -> F64:
@@ -182,10 +173,10 @@ def track_features(
         dt1 = np.maximum(np.diff(t), 1e-3)
         v = np.diff(pos, axis=0) / dt1[:, None]
         dtm = np.maximum(0.5 * (dt1[1:] + dt1[:-1]), 1e-3)
-        accel = float(np.median(np.linalg.norm(np.diff(v, axis=0), axis=1) / dtm))
+        accel = median(np.linalg.norm(np.diff(v, axis=0), axis=1) / dtm)
     else:
         accel = float("nan")
-    centre = np.median(pos, axis=0)
+    centre = column_medians(pos)
     if n >= 2:
         _, velocity, _ = constant_velocity_fit(t, pos)
         net = float(np.linalg.norm(velocity)) * duration
@@ -198,32 +189,32 @@ def track_features(
             np.log1p(n),
             duration,
             n / (duration / 0.1 + 1.0),
-            _nanmedian(height),
-            _nanpercentile(height, 10),
+            nanmedian(height),
+            nanpercentile(height, 10),
             low,
-            _nanmedian(np.where(cl, det.extent[:n], np.nan)),
-            _nanpercentile(np.where(cl, det.extent[:n], np.nan), 90),
-            _nanmedian(size[:, 2]),
-            _nanpercentile(size[:, 2], 90),
-            _nanmedian(np.max(size[:, :2], axis=1)),
-            _nanpercentile(np.max(size[:, :2], axis=1), 90),
-            float(np.median(pos[:, 2] / np.maximum(rng, 1e-3))),
-            float(np.median(log_cross)),
-            float(np.percentile(log_cross, 90)),
-            float(np.median(np.log1p(rec.n_points[:n]))),
-            float(np.median(np.log10(np.maximum(rng, 1e-3)))),
+            nanmedian(np.where(cl, det.extent[:n], np.nan)),
+            nanpercentile(np.where(cl, det.extent[:n], np.nan), 90),
+            nanmedian(size[:, 2]),
+            nanpercentile(size[:, 2], 90),
+            nanmedian(np.max(size[:, :2], axis=1)),
+            nanpercentile(np.max(size[:, :2], axis=1), 90),
+            median(pos[:, 2] / np.maximum(rng, 1e-3)),
+            median(log_cross),
+            percentile(log_cross, 90),
+            median(np.log1p(rec.n_points[:n])),
+            median(np.log10(np.maximum(rng, 1e-3))),
             float(np.mean(both)),
             float(np.mean((n_mid == 0) & (n_avia > 0) & cl)),
-            _nanmedian(
+            nanmedian(
                 np.where(both, np.log10(np.maximum(n_mid, 1) / np.maximum(n_avia, 1)), np.nan)
             ),
             float(np.mean(raw)),
-            float(np.median(speeds)) if len(speeds) else float("nan"),
-            float(np.percentile(speeds, 90)) if len(speeds) else float("nan"),
+            median(speeds) if len(speeds) else float("nan"),
+            percentile(speeds, 90) if len(speeds) else float("nan"),
             accel,
-            float(np.median(nis)) if len(nis) else float("nan"),
+            median(nis) if len(nis) else float("nan"),
             float(np.mean(nis > _NIS95)) if len(nis) else float("nan"),
-            float(np.percentile(np.linalg.norm(pos - centre, axis=1), 90)),
+            percentile(np.linalg.norm(pos - centre, axis=1), 90),
             net,
             path,
             z_est,
@@ -258,7 +249,7 @@ def _box_estimates(
     z = det.size[:n][ok, 2]
     xy = np.max(det.size[:n][ok, :2], axis=1)
     return (
-        _nanmedian(z * scale),
-        _nanmedian(xy * scale),
-        _nanmedian(z / np.maximum(xy, 1e-3)),
+        nanmedian(z * scale),
+        nanmedian(xy * scale),
+        nanmedian(z / np.maximum(xy, 1e-3)),
     )

@@ -90,6 +90,7 @@ from numpy.typing import NDArray
 
 from cldet.config import TrackingConfig
 from cldet.core.features import TrackDetections, track_detections, track_features
+from cldet.core.stats import column_medians, median, percentile
 from cldet.core.tracking import (
     MIN_TRACK_HITS,
     ClusterTable,
@@ -142,16 +143,6 @@ def _net_motion(t: NDArray[np.float64], pos: NDArray[np.float64]) -> float:
     return float(np.linalg.norm(velocity)) * float(t[-1] - t[0])
 
 
-def _p90(x: NDArray[np.float64]) -> float:
-    """``np.percentile(x, 90)`` (linear interpolation) without its overhead on short arrays: the
-    scoring takes two or three per candidate track, hundreds of tracks a sequence."""
-    s = np.sort(x)
-    pos = 0.9 * (len(s) - 1)
-    lo = int(pos)
-    hi = min(lo + 1, len(s) - 1)
-    return float(s[lo] + (s[hi] - s[lo]) * (pos - lo))
-
-
 def sampling_jitter(
     extent: NDArray[np.float64], n_points: NDArray[np.int64]
 ) -> NDArray[np.float64]:
@@ -178,8 +169,8 @@ def _is_fixed(t: NDArray[np.float64], pos: NDArray[np.float64], spread_m: float)
         return False
     c = np.cumsum(np.vstack([np.zeros((1, 3)), pos]), axis=0)
     mean = (c[FIXED_MEAN_HITS:] - c[:-FIXED_MEAN_HITS]) / FIXED_MEAN_HITS
-    dist = np.linalg.norm(mean - np.median(mean, axis=0), axis=1)
-    return _p90(dist) < spread_m
+    dist = np.linalg.norm(mean - column_medians(mean), axis=1)
+    return percentile(dist, 90) < spread_m
 
 
 def detection_weights(
@@ -296,11 +287,11 @@ def _hand_factor(
     pos = rec.positions
     factor = 1.0
     speeds = rec.speed[2:] if h > 3 else rec.speed[1:]
-    if len(speeds) and _p90(speeds) > cfg.max_speed:
+    if len(speeds) and percentile(speeds, 90) > cfg.max_speed:
         factor *= 0.1
-    centre = np.median(pos, axis=0)
-    spread = _p90(np.linalg.norm(pos - centre, axis=1))
-    jitter = float(np.median(sampling_jitter(det.extent, rec.n_points)))
+    centre = column_medians(pos)
+    spread = percentile(np.linalg.norm(pos - centre, axis=1), 90)
+    jitter = median(sampling_jitter(det.extent, rec.n_points))
     if _is_fixed(times_s[rec.frames], pos, fixed_spread(cfg, jitter)):
         factor *= cfg.fixed_factor
     elif spread < cfg.static_spread_m or (

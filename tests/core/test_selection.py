@@ -12,13 +12,7 @@ from cldet.config import load_config
 from cldet.core.estimator import _weigher
 from cldet.core.features import FEATURE_NAMES
 from cldet.core.prior import load_prior
-from cldet.core.selection import LEARNED_FLOOR, TrackWeigher, _p90
-
-
-@pytest.mark.parametrize("n", [1, 2, 3, 7, 10, 101, 1000])
-def test_p90_equals_numpys_percentile(n: int) -> None:
-    x = np.random.default_rng(n).normal(size=n)
-    assert _p90(x) == pytest.approx(float(np.percentile(x, 90)), abs=1e-12)
+from cldet.core.selection import LEARNED_FLOOR, TrackWeigher
 
 
 def test_learned_weighings_multiply_each_within_its_floor() -> None:

@@ -1,0 +1,59 @@
+"""The order statistics of short arrays (cldet.core.stats) are numpy's, bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cldet.core.stats import column_medians, median, nanmedian, nanpercentile, percentile
+
+
+def _same(a: float, b: float) -> bool:
+    return a == b or (np.isnan(a) and np.isnan(b))
+
+
+def _arrays(seed: int) -> list[np.ndarray]:
+    """Short arrays of every kind the track summaries see: any length, scale and ties, some
+    with NaN or infinite values."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(400):
+        n = int(rng.integers(1, 40))
+        x = rng.normal(0.0, 1.0, n) * 10 ** rng.uniform(-3, 3)
+        if rng.random() < 0.3:
+            x = np.round(x, 1)  # ties
+        if rng.random() < 0.3:
+            x[rng.random(n) < 0.3] = np.nan
+        if rng.random() < 0.1:
+            x[rng.random(n) < 0.3] = rng.choice([np.inf, -np.inf])
+        out.append(x)
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.filterwarnings("ignore:invalid value:RuntimeWarning")  # inf - inf, on both sides
+def test_median_and_percentiles_equal_numpys_exactly(seed: int) -> None:
+    for x in _arrays(seed):
+        finite = x[np.isfinite(x)]
+        assert _same(median(x), float(np.median(x)))
+        assert _same(nanmedian(x), float(np.median(finite)) if len(finite) else np.nan)
+        for q in (10, 25, 50, 90):
+            assert _same(percentile(x, q), float(np.percentile(x, q)))
+            expected = float(np.percentile(finite, q)) if len(finite) else np.nan
+            assert _same(nanpercentile(x, q), expected)
+
+
+def test_the_nan_forms_skip_what_is_not_finite() -> None:
+    x = np.array([np.nan, 3.0, np.inf, 1.0, 2.0])
+    assert nanmedian(x) == 2.0 and nanpercentile(x, 90) == pytest.approx(2.8)
+    assert np.isnan(median(x)) and np.isnan(percentile(x, 90))
+    assert np.isnan(nanmedian(np.array([np.nan, np.inf])))
+
+
+def test_column_medians_equal_numpys_exactly() -> None:
+    rng = np.random.default_rng(2)
+    for n in (1, 2, 3, 4, 7, 10, 51):
+        a = rng.normal(0.0, 30.0, (n, 3))
+        np.testing.assert_array_equal(column_medians(a), np.median(a, axis=0))
+        a[0, 1] = np.nan
+        np.testing.assert_array_equal(column_medians(a), np.median(a, axis=0))
