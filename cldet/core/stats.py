@@ -5,7 +5,9 @@ summary (``cldet.core.features``) takes two dozen of them, for hundreds of candi
 sequence, on arrays of a few to a few hundred values. One ``np.sort`` and a little arithmetic
 give the same numbers, bit for bit: the median of an even count is the mean of the middle two,
 and a percentile is numpy's default ("linear") interpolation, including the form of its lerp
-(``b - (b - a) * (1 - t)`` where ``t >= 0.5``).
+(``b - (b - a) * (1 - t)`` where ``t >= 0.5``). Inputs are float arrays (integers would add
+in their own type before the halving); a median of zeros may keep a zero's sign where numpy
+drops it, which no comparison sees.
 """
 
 from __future__ import annotations
