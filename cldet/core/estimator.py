@@ -1188,10 +1188,8 @@ def _stop_unseen(
         if rate <= 0.0:
             continue
         dt = t_s[beyond] - t_s[end]
-        tau, still = (
-            decay_tau(velocity, cfg.extrapolation_tau_s, cfg.max_decel_mps2),
-            np.zeros((2, 2)),
-        )
+        tau = decay_tau(velocity, cfg.extrapolation_tau_s, cfg.max_decel_mps2)
+        still = np.zeros((2, 2))
         path = np.array([extrapolate(origin, velocity, still, d, 0.0, tau, hold_s)[0] for d in dt])
         r_end = float(np.linalg.norm(origin))
         r = np.maximum(np.linalg.norm(path, axis=1), 1e-3)
