@@ -42,6 +42,7 @@ from __future__ import annotations
 
 from typing import TypeVar
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
@@ -62,9 +63,7 @@ _END_FIT = 8  # inliers nearest an end that predict the line beyond it
 # that the cap scales with the sequence's length (and at least _MIN_SEED_CAP)
 _SEEDS_PER_FRAME = 2_500
 _MIN_SEED_CAP = 200_000
-_COUNT_CHUNK = 20_000  # seeds counted at once (bounds the memory of long sequences)
 _Speed = TypeVar("_Speed", float, NDArray[np.float64])
-_TIME_SCALE_M_PER_S = 1e4  # space-time lookups: 0.01 s apart is 100 m apart
 
 
 class _Pool:
@@ -73,7 +72,7 @@ class _Pool:
     def __init__(
         self, tables: list[ClusterTable], times_s: NDArray[np.float64], cfg: TrackingConfig
     ) -> None:
-        frames, clusters = [], []
+        frames, clusters, positions = [], [], []
         for f, table in enumerate(tables):
             if not len(table):
                 continue
@@ -88,55 +87,125 @@ class _Pool:
             keep = np.flatnonzero(ok)
             frames.append(np.full(len(keep), f, dtype=np.int64))
             clusters.append(keep.astype(np.int64))
+            positions.append(table.centroid[keep])
         self.frame = np.concatenate(frames) if frames else np.zeros(0, dtype=np.int64)
         self.cluster = np.concatenate(clusters) if clusters else np.zeros(0, dtype=np.int64)
         self.pos = (
-            np.array([tables[f].centroid[c] for f, c in zip(self.frame, self.cluster, strict=True)])
-            if len(self.frame)
+            np.concatenate(positions).astype(np.float64, copy=False)
+            if positions
             else np.zeros((0, 3))
         )
         self.t = times_s[self.frame]
         self.times = times_s
         n = len(tables)
         self.start = np.searchsorted(self.frame, np.arange(n + 1))  # candidates of frame f
-        self.trees: dict[int, cKDTree] = {
-            f: cKDTree(self.pos[self.start[f] : self.start[f + 1]])
-            for f in range(n)
-            if self.start[f + 1] > self.start[f]
-        }
-        # one space-time tree for lookups in many frames at once: time scaled so far apart that
-        # no tolerance reaches from one frame into another
-        self._st = cKDTree(np.column_stack([self.pos, self.t * _TIME_SCALE_M_PER_S]))
+        # the frames that have candidates, in time order, and their times
+        self.frames = np.flatnonzero(np.diff(self.start) > 0)
         self.used = np.zeros(len(self.frame), dtype=bool)
 
     def nearest(
-        self, frames: NDArray[np.int64] | int, points: NDArray[np.float64], tol: float
+        self, frames: NDArray[np.int64], points: NDArray[np.float64], tol: float
     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """Per (frame, point): the distance to that frame's nearest unused candidate within tol
-        (inf: none), and that candidate's index in the pool (-1: none). ``frames``: one frame
-        index per point, or one for all of them."""
-        m = len(points)
-        if m == 0 or len(self.frame) == 0:
-            return np.full(m, np.inf), np.full(m, -1, dtype=np.int64)
-        k = min(3, len(self.frame))
-        if isinstance(frames, int):  # one frame: its own small tree
-            tree = self.trees.get(frames)
-            if tree is None:
-                return np.full(m, np.inf), np.full(m, -1, dtype=np.int64)
-            k = min(k, tree.n)
-            d, j = tree.query(points, k=k, distance_upper_bound=tol)
-            d, j = d.reshape(m, k), j.reshape(m, k)
-            idx = np.where(j < tree.n, j + self.start[frames], -1)
-        else:
-            query = np.column_stack([points, self.times[frames] * _TIME_SCALE_M_PER_S])
-            d, j = self._st.query(query, k=k, distance_upper_bound=tol)
-            d, j = d.reshape(m, k), j.reshape(m, k)
-            idx = np.where(j < len(self.frame), j, -1)
-        d = np.where((idx >= 0) & ~self.used[np.maximum(idx, 0)], d, np.inf)
-        best = np.argmin(d, axis=1)
-        rows = np.arange(m)
-        dist = d[rows, best]
-        return dist, np.where(np.isfinite(dist), idx[rows, best], -1)
+        (inf: none), and that candidate's index in the pool (-1: none); only the frame's three
+        candidates nearest the point are looked at (a point crowded by taken candidates finds
+        none). ``frames``: one frame index per point."""
+        dist = np.full(len(points), np.inf)
+        idx = np.full(len(points), -1, dtype=np.int64)
+        _nearest_kernel(
+            np.asarray(frames, dtype=np.int64),
+            np.ascontiguousarray(points, dtype=np.float64),
+            float(tol),
+            self.start,
+            self.pos,
+            self.used,
+            dist,
+            idx,
+        )
+        return dist, idx
+
+
+@numba.njit(cache=True)
+def _nearest_kernel(
+    frames: NDArray[np.int64],
+    points: NDArray[np.float64],
+    tol: float,
+    start: NDArray[np.int64],
+    pos: NDArray[np.float64],
+    used: NDArray[np.bool_],
+    dist: NDArray[np.float64],
+    idx: NDArray[np.int64],
+) -> None:
+    """``_Pool.nearest`` (fills ``dist`` and ``idx``): a frame holds a few candidates, so every
+    one of them is measured."""
+    for q in range(len(points)):
+        f = frames[q]
+        # the three nearest within tol, nearest first (ties: the lower index)
+        d3 = np.full(3, np.inf)
+        i3 = np.full(3, -1, dtype=np.int64)
+        for c in range(start[f], start[f + 1]):
+            dx = pos[c, 0] - points[q, 0]
+            dy = pos[c, 1] - points[q, 1]
+            dz = pos[c, 2] - points[q, 2]
+            d = np.sqrt(dx * dx + dy * dy + dz * dz)
+            if not d < tol or not d < d3[2]:
+                continue
+            k = 2
+            while k > 0 and d < d3[k - 1]:
+                d3[k] = d3[k - 1]
+                i3[k] = i3[k - 1]
+                k -= 1
+            d3[k] = d
+            i3[k] = c
+        for k in range(3):
+            if i3[k] >= 0 and not used[i3[k]]:
+                dist[q] = d3[k]
+                idx[q] = i3[k]
+                break
+
+
+@numba.njit(cache=True)
+def _pairs_kernel(
+    pos: NDArray[np.float64],
+    times_s: NDArray[np.float64],
+    frames: NDArray[np.int64],
+    start: NDArray[np.int64],
+    reach: float,
+    max_speed: float,
+    min_speed: float,
+    after_s: float,
+    out: NDArray[np.int64],
+) -> int:
+    """The seed pairs of ``_seeds`` in its order (earlier frame, later frame, then the
+    candidates' own order), written to ``out`` while it has room; returns how many there are
+    (call again with a larger ``out`` when that is more than its rows)."""
+    n = 0
+    nf = len(frames)
+    for i in range(nf):
+        a = frames[i]
+        if times_s[a] < after_s - reach:
+            continue
+        for j in range(i + 1, nf):
+            b = frames[j]
+            dt = times_s[b] - times_s[a]
+            if dt > reach:
+                break
+            if times_s[b] < after_s:
+                continue
+            r = max_speed * dt
+            lo = min_speed * dt
+            for ia in range(start[a], start[a + 1]):
+                for ib in range(start[b], start[b + 1]):
+                    dx = pos[ib, 0] - pos[ia, 0]
+                    dy = pos[ib, 1] - pos[ia, 1]
+                    dz = pos[ib, 2] - pos[ia, 2]
+                    d2 = dx * dx + dy * dy + dz * dz
+                    if d2 <= r * r and np.sqrt(d2) >= lo:
+                        if n < len(out):
+                            out[n, 0] = ia
+                            out[n, 1] = ib
+                        n += 1
+    return n
 
 
 def _seeds(
@@ -144,30 +213,23 @@ def _seeds(
 ) -> NDArray[np.int64]:
     """(S,2) candidate pairs (earlier, later) whose implied speed a drone could fly, the later
     one at ``after_s`` or after."""
-    pairs = []
-    frames = sorted(pool.trees)
     reach = min(cfg.line_seed_s, cfg.line_window_s)
-    for i, a in enumerate(frames):
-        if times_s[a] < after_s - reach:
-            continue
-        for b in frames[i + 1 :]:
-            dt = float(times_s[b] - times_s[a])
-            if dt > reach:
-                break
-            if times_s[b] < after_s:
-                continue
-            hits = pool.trees[a].query_ball_tree(pool.trees[b], cfg.max_speed * dt)
-            ia = np.repeat(np.arange(len(hits)), [len(h) for h in hits])
-            if not len(ia):
-                continue
-            ib = np.concatenate([np.asarray(h, dtype=np.int64) for h in hits])
-            ia, ib = ia + pool.start[a], ib + pool.start[b]
-            dist = np.linalg.norm(pool.pos[ib] - pool.pos[ia], axis=1)
-            keep = dist >= cfg.line_min_speed * dt
-            pairs.append(np.stack([ia[keep], ib[keep]], axis=1))
-    if not pairs:
-        return np.zeros((0, 2), dtype=np.int64)
-    out = np.concatenate(pairs)
+    args = (
+        pool.pos,
+        times_s,
+        pool.frames,
+        pool.start,
+        float(reach),
+        float(cfg.max_speed),
+        float(cfg.line_min_speed),
+        float(after_s),
+    )
+    out = np.empty((4 * len(pool.frame), 2), dtype=np.int64)
+    n = _pairs_kernel(*args, out)
+    if n > len(out):
+        out = np.empty((n, 2), dtype=np.int64)
+        _pairs_kernel(*args, out)
+    out = out[:n]
     cap = max(_SEEDS_PER_FRAME * len(times_s), _MIN_SEED_CAP)
     if len(out) > cap:
         gap = pool.t[out[:, 1]] - pool.t[out[:, 0]]
@@ -183,54 +245,85 @@ def _count(
     half_scan_s: float,
 ) -> NDArray[np.int64]:
     """Per seed: distinct places along its line (within the window around it) where a frame
-    has a candidate on the line.
-
-    Seeds are counted in chunks of ``_COUNT_CHUNK`` in start-time order, so that memory stays
-    bounded however long the sequence.
-    """
+    has a candidate on the line."""
     a, b = seeds[:, 0], seeds[:, 1]
     ta, tb = pool.t[a], pool.t[b]
     v = (pool.pos[b] - pool.pos[a]) / (tb - ta)[:, None]
     speed = np.linalg.norm(v, axis=1)
     tol = _tolerance(speed, cfg, half_scan_s)
-    place = 2.0 * tol  # along-line length of one place
-    w = cfg.line_seed_s  # a seed pair predicts well only near itself
-    by_start = np.argsort(ta, kind="stable")
     counts = np.zeros(len(seeds), dtype=np.int64)
-    frames = np.array(sorted(pool.trees), dtype=np.int64)
-    frame_t = times_s[frames]
-    for lo in range(0, len(seeds), _COUNT_CHUNK):
-        chunk = by_start[lo : lo + _COUNT_CHUNK]
-        ta_chunk = ta[chunk]  # sorted
-        first, last = np.searchsorted(
-            frame_t, [ta_chunk[0] - w, float(tb[chunk].max()) + w], side="left"
-        )
-        found_seed: list[NDArray[np.int64]] = []
-        found_place: list[NDArray[np.int64]] = []
-        span = slice(first, last + 1)
-        for f, tf in zip(frames[span].tolist(), frame_t[span].tolist(), strict=True):
-            # tb <= ta + seed_s, so a seed whose window holds tf starts within
-            # [tf - w - seed_s, tf + w]
-            i0, i1 = np.searchsorted(ta_chunk, [tf - w - cfg.line_seed_s, tf + w], side="left")
-            near = chunk[i0:i1]
-            sel = near[(tf >= ta[near] - w) & (tf <= tb[near] + w)]
-            if not len(sel):
-                continue
-            dt = tf - ta[sel]
-            pred = pool.pos[a[sel]] + v[sel] * dt[:, None]
-            d, _ = pool.nearest(f, pred, float(tol[sel].max()))
-            on = d <= tol[sel]
-            found_seed.append(sel[on])
-            found_place.append(np.floor(dt[on] * speed[sel[on]] / place[sel[on]]).astype(np.int64))
-        if not found_seed:
-            continue
-        seed_ids, places = np.concatenate(found_seed), np.concatenate(found_place)
-        # distinct places per seed: a static clump on the line counts once
-        places -= places.min()
-        width = int(places.max()) + 1
-        key = np.unique(seed_ids * width + places)  # one int64 per (seed, place)
-        counts += np.bincount(key // width, minlength=len(seeds))
+    _count_kernel(
+        pool.pos,
+        pool.t,
+        pool.frames,
+        times_s[pool.frames],
+        pool.start,
+        np.ascontiguousarray(a),
+        np.ascontiguousarray(b),
+        v,
+        speed,
+        tol,
+        2.0 * tol,  # along-line length of one place
+        float(cfg.line_seed_s),  # a seed pair predicts well only near itself
+        counts,
+    )
     return counts
+
+
+@numba.njit(cache=True)
+def _count_kernel(
+    pos: NDArray[np.float64],
+    t: NDArray[np.float64],
+    frames: NDArray[np.int64],
+    frame_t: NDArray[np.float64],
+    start: NDArray[np.int64],
+    a: NDArray[np.int64],
+    b: NDArray[np.int64],
+    v: NDArray[np.float64],
+    speed: NDArray[np.float64],
+    tol: NDArray[np.float64],
+    place: NDArray[np.float64],
+    w: float,
+    counts: NDArray[np.int64],
+) -> None:
+    """``_count`` (fills ``counts``): for each seed, the frames within ``w`` of it (and whose
+    window of ``w`` plus the seed's reach, ``w`` again, holds the seed's start), the nearest
+    candidate to the seed's line at the frame's time; one within the seed's tolerance marks
+    the place along the line (``place`` long) it lies in; a static clump counts once."""
+    places = np.empty(len(frames), dtype=np.int64)
+    for s in range(len(a)):
+        ta, tb = t[a[s]], t[b[s]]
+        m = 0
+        q = np.searchsorted(frame_t, ta - w)
+        while q < len(frames):
+            tf = frame_t[q]
+            if tf > tb + w:
+                break
+            if tf >= ta - w and tf - w - w <= ta < tf + w:
+                dt = tf - ta
+                px = pos[a[s], 0] + v[s, 0] * dt
+                py = pos[a[s], 1] + v[s, 1] * dt
+                pz = pos[a[s], 2] + v[s, 2] * dt
+                best = np.inf
+                f = frames[q]
+                for c in range(start[f], start[f + 1]):
+                    dx = pos[c, 0] - px
+                    dy = pos[c, 1] - py
+                    dz = pos[c, 2] - pz
+                    d = np.sqrt(dx * dx + dy * dy + dz * dz)
+                    if d < best:
+                        best = d
+                if best <= tol[s]:
+                    places[m] = np.int64(np.floor(dt * speed[s] / place[s]))
+                    m += 1
+            q += 1
+        if m:
+            srt = np.sort(places[:m])
+            n = 1
+            for k in range(1, m):
+                if srt[k] != srt[k - 1]:
+                    n += 1
+            counts[s] = n
 
 
 def _tolerance(speed: _Speed, cfg: TrackingConfig, half_scan_s: float) -> _Speed:
@@ -256,9 +349,8 @@ def _grow(
         lo = int(np.searchsorted(times_s, t0 - cfg.line_window_s, side="left"))
         hi = int(np.searchsorted(times_s, t1 + cfg.line_window_s, side="right"))
         window = np.arange(lo, hi)
-        todo = np.array(
-            [f for f in window.tolist() if f not in members and f in pool.trees], dtype=np.int64
-        )
+        todo = window[pool.start[window + 1] > pool.start[window]]  # frames with candidates
+        todo = todo[[f not in members for f in todo.tolist()]]
         if not len(todo):
             return idx
         tf = times_s[todo]
