@@ -5,39 +5,58 @@ summary (``cldet.core.features``) takes two dozen of them, for hundreds of candi
 sequence, on arrays of a few to a few hundred values. One ``np.sort`` and a little arithmetic
 give the same numbers, bit for bit: the median of an even count is the mean of the middle two,
 and a percentile is numpy's default ("linear") interpolation, including the form of its lerp
-(``b - (b - a) * (1 - t)`` where ``t >= 0.5``). Inputs are float arrays (integers would add
-in their own type before the halving); a median of zeros may keep a zero's sign where numpy
-drops it, which no comparison sees.
+(``b - (b - a) * (1 - t)`` where ``t >= 0.5``). Inputs are float64 arrays (integers or
+float32 would add in their own type before the halving); a median of zeros may keep a zero's
+sign where numpy drops it, which no comparison sees. The two on sorted values are compiled, so
+that the track summary's compiled pass (``cldet.core.features``) calls them too.
 """
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["column_medians", "median", "nanmedian", "nanpercentile", "percentile"]
+__all__ = [
+    "column_medians",
+    "median",
+    "median_of_sorted",
+    "percentile",
+    "percentile_of_sorted",
+]
 
 
-def _median_of_sorted(s: NDArray[np.floating]) -> float:
+@numba.njit(cache=True)
+def median_of_sorted(s: NDArray[np.floating]) -> float:
+    """The median of sorted values (NaN: none); compiled, so that compiled code can call it."""
     n = len(s)
+    if n == 0:
+        return np.nan
     h = n // 2
     if n % 2:
-        return float(s[h])
-    return float((s[h - 1] + s[h]) / 2.0)
+        return s[h]
+    return (s[h - 1] + s[h]) / 2.0
 
 
-def _percentile_of_sorted(s: NDArray[np.floating], q: float) -> float:
+@numba.njit(cache=True)
+def percentile_of_sorted(s: NDArray[np.floating], q: float) -> float:
+    """The ``q``-th percentile of sorted values (NaN: none), numpy's "linear" method."""
     n = len(s)
+    if n == 0:
+        return np.nan
     virtual = (n - 1) * (q / 100)
     # numpy's neighbours: past the last value both are the last, with the fraction measured
     # from index -1 (which matters only to an infinite last value: inf - inf)
-    lo = -1 if virtual >= n - 1 else int(np.floor(virtual))
-    a, b = s[lo], s[-1 if lo == -1 else lo + 1]
+    if virtual >= n - 1:
+        lo, a, b = -1, s[n - 1], s[n - 1]
+    else:
+        lo = int(np.floor(virtual))
+        a, b = s[lo], s[lo + 1]
     t = virtual - lo
     diff = b - a
     if t >= 0.5:
-        return float(b - diff * (1 - t))
-    return float(a + diff * t)
+        return b - diff * (1 - t)
+    return a + diff * t
 
 
 def median(x: NDArray[np.floating]) -> float:
@@ -45,7 +64,7 @@ def median(x: NDArray[np.floating]) -> float:
     s = np.sort(x)
     if np.isnan(s[-1]):  # NaN sorts last
         return float("nan")
-    return _median_of_sorted(s)
+    return float(median_of_sorted(s))
 
 
 def column_medians(a: NDArray[np.floating]) -> NDArray[np.float64]:
@@ -62,17 +81,4 @@ def percentile(x: NDArray[np.floating], q: float) -> float:
     s = np.sort(x)
     if np.isnan(s[-1]):
         return float("nan")
-    return _percentile_of_sorted(s, q)
-
-
-def nanmedian(x: NDArray[np.floating]) -> float:
-    """The median of the finite values of ``x``; NaN where there are none."""
-    s = np.sort(x[np.isfinite(x)])
-    return _median_of_sorted(s) if len(s) else float("nan")
-
-
-def nanpercentile(x: NDArray[np.floating], q: float) -> float:
-    """The ``q``-th percentile (numpy's linear interpolation) of the finite values of ``x``;
-    NaN where there are none."""
-    s = np.sort(x[np.isfinite(x)])
-    return _percentile_of_sorted(s, q) if len(s) else float("nan")
+    return float(percentile_of_sorted(s, q))
