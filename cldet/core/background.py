@@ -91,6 +91,7 @@ CORE = np.uint8(2)  # at or behind the static range of its own cell
 # two ranges in one cell belong to the same surface when within max(1 m, 10 %): the clearance
 # the floating-blob rule uses, far above range noise and foliage depth
 _SAME_SURFACE_M = 1.0
+Directions = tuple[NDArray[np.int64], NDArray[np.float32]]  # points' direction cells, ranges
 NO_ONSET = np.iinfo(np.int64).min  # a static surface there as long as the window remembers
 _ONSET_SEEN_THROUGH = 2  # bins with a farther return that show a spot was empty before
 _ONSET_CONFIDENCE = 0.95  # ... or bins without any return, at the surface's own hit rate
@@ -149,14 +150,22 @@ def azimuth_groups(cell_deg: float, polar_width: float) -> NDArray[np.int64]:
     return out
 
 
+@numba.njit(cache=True)
 def pool_groups(image: NDArray[np.float32], groups: NDArray[np.int64]) -> NDArray[np.float32]:
     """(n_el, n_az) image with each row's groups of columns (``azimuth_groups``) set to their
     minimum: one cell's value on every column of it, so neighbour operations see whole cells."""
     out = image.copy()
-    n_az = image.shape[1]
-    for e in np.flatnonzero(groups > 1):
-        g = int(groups[e])
-        out[e] = np.repeat(image[e].reshape(n_az // g, g).min(axis=1), g)
+    n_el, n_az = image.shape
+    for e in range(n_el):
+        g = groups[e]
+        if g <= 1:
+            continue
+        for a0 in range(0, n_az, g):
+            m = image[e, a0]
+            for a in range(a0 + 1, a0 + g):
+                m = min(m, image[e, a])
+            for a in range(a0, a0 + g):
+                out[e, a] = m
     return out
 
 
@@ -592,14 +601,20 @@ class BackgroundModel:
         self._bin_end_ns += (late + 1) * self._bin_ns
         self._refresh()
 
-    def update(self, stamp_ns: int, points: NDArray[np.floating]) -> None:
-        """Count one frame's points ((N,3) metres, Mid-360 frame) into the current bin."""
+    def update(
+        self,
+        stamp_ns: int,
+        points: NDArray[np.floating],
+        directions: Directions | None = None,
+    ) -> None:
+        """Count one frame's points ((N,3) metres, Mid-360 frame) into the current bin;
+        ``directions``: their cells and ranges (``directions``) when already known."""
         self.advance(stamp_ns)
         self.n_frames += 1
         if len(points) == 0:
             return
         self._last_points = np.asarray(points)
-        cells, rng = self._cells(points)
+        cells, rng = directions if directions is not None else self._cells(points)
         _nearest_kernel(cells, rng, self._current)
 
     def _refresh(self) -> None:
@@ -682,8 +697,11 @@ class BackgroundModel:
         below = (centre_deg < self._field_bottom_deg)[:, None]
         return below & ~self._seen.reshape(self._n_el, self._n_az)
 
-    def classify(self, points: NDArray[np.floating]) -> NDArray[np.uint8]:
-        """Label each point (N,3) FOREGROUND (0), MARGIN (1) or CORE (2) background.
+    def classify(
+        self, points: NDArray[np.floating], directions: Directions | None = None
+    ) -> NDArray[np.uint8]:
+        """Label each point (N,3) FOREGROUND (0), MARGIN (1) or CORE (2) background;
+        ``directions``: their cells and ranges (``directions``) when already known.
 
         During the warm-up every point is CORE background.
         """
@@ -691,10 +709,15 @@ class BackgroundModel:
             return np.zeros(0, dtype=np.uint8)
         if not self.warm:
             return np.full(len(points), CORE, dtype=np.uint8)
-        cells, rng = self._cells(points)
+        cells, rng = directions if directions is not None else self._cells(points)
         return self._labels(cells, rng)
 
-    def _cells(self, points: NDArray[np.floating]) -> tuple[NDArray[np.int64], NDArray[np.float32]]:
+    def directions(self, points: NDArray[np.floating]) -> Directions:
+        """The direction cells and ranges of points (N,3) on this model's grid, for
+        ``classify`` and ``update`` of the same points (or a subset: index both arrays)."""
+        return self._cells(points)
+
+    def _cells(self, points: NDArray[np.floating]) -> Directions:
         """``direction_cells`` of points (N,3) on this model's grid: cell indices and ranges."""
         cells, rng, _, _ = direction_cells(points, self.cfg.cell_deg, self.cfg.polar_cell_width)
         return cells, rng

@@ -399,7 +399,8 @@ class TrackEstimator:
         pts, n_mid = fuse_points(frame, cfg)
         bg = self.background
         bg.advance(frame.stamp_ns)
-        labels_bg = bg.classify(pts)
+        cells, ranges = bg.directions(pts)  # for classify and update alike
+        labels_bg = bg.classify(pts, (cells, ranges))
         if self._zones:
             self._reclaim(pts, labels_bg)
         fg_idx = np.flatnonzero(labels_bg == FOREGROUND)
@@ -442,7 +443,10 @@ class TrackEstimator:
         owner = self._tracker.step(index, t_s, table, pts)
         self._forget_ended()
         keep = self._account(index, t_s, table, owner, labels, fg_idx, pts)
-        bg.update(frame.stamp_ns, pts if keep is None else pts[keep])
+        if keep is None:
+            bg.update(frame.stamp_ns, pts, (cells, ranges))
+        else:
+            bg.update(frame.stamp_ns, pts[keep], (cells[keep], ranges[keep]))
         estimate = self._decide(index, frame.stamp_ns, owner)
         self._causal.append(estimate)
         return FrameDetections(
