@@ -253,19 +253,21 @@ class _Evidence:
     last_t_s: float = 0.0
     first_position: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     both: int = 0  # detections seen by both LiDARs in one cluster
-    lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
-    upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
+    # the box around its detections and around its running means, per axis (floats: a few
+    # comparisons a detection, without numpy's per-call cost)
+    lower: list[float] = field(default_factory=lambda: [np.inf] * 3)
+    upper: list[float] = field(default_factory=lambda: [-np.inf] * 3)
     moved: float = 0.0  # largest edge of the box around its detections, metres
-    recent: deque[NDArray[np.float64]] = field(
+    recent: deque[tuple[float, float, float]] = field(
         default_factory=lambda: deque(maxlen=FIXED_MEAN_HITS)
     )
-    recent_sum: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
-    mean_lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
-    mean_upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
+    recent_sum: list[float] = field(default_factory=lambda: [0.0] * 3)
+    mean_lower: list[float] = field(default_factory=lambda: [np.inf] * 3)
+    mean_upper: list[float] = field(default_factory=lambda: [-np.inf] * 3)
     means: int = 0  # running means of FIXED_MEAN_HITS detections taken into the box
     mean_moved: float = 0.0  # largest edge of the box around those means, metres
-    first_mean: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
-    displaced: float = 0.0  # from the first running mean to the latest, metres
+    first_mean: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    last_mean: tuple[float, float, float] = (0.0, 0.0, 0.0)
     jitter_sum: float = 0.0  # summed sampling jitter of the detections (selection.sampling_jitter)
     protected: bool = False  # protected from the background once (``background.protect_hold``)
 
@@ -286,22 +288,39 @@ class _Evidence:
         self.last_t_s = t_s
         self.hits += 1
         self.both += int(both)
-        np.minimum(self.lower, position, out=self.lower)
-        np.maximum(self.upper, position, out=self.upper)
-        self.moved = float(np.max(self.upper - self.lower))
+        p = (float(position[0]), float(position[1]), float(position[2]))
+        lo, hi, total = self.lower, self.upper, self.recent_sum
+        for k in range(3):
+            lo[k] = min(lo[k], p[k])
+            hi[k] = max(hi[k], p[k])
+        self.moved = max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2])
         if len(self.recent) == FIXED_MEAN_HITS:
-            self.recent_sum -= self.recent[0]
-        self.recent.append(position)
-        self.recent_sum += position
+            old = self.recent[0]
+            for k in range(3):
+                total[k] -= old[k]
+        self.recent.append(p)
+        for k in range(3):
+            total[k] += p[k]
         if len(self.recent) == FIXED_MEAN_HITS:
-            mean = self.recent_sum / FIXED_MEAN_HITS
-            np.minimum(self.mean_lower, mean, out=self.mean_lower)
-            np.maximum(self.mean_upper, mean, out=self.mean_upper)
-            self.mean_moved = float(np.max(self.mean_upper - self.mean_lower))
+            mean = (
+                total[0] / FIXED_MEAN_HITS,
+                total[1] / FIXED_MEAN_HITS,
+                total[2] / FIXED_MEAN_HITS,
+            )
+            mlo, mhi = self.mean_lower, self.mean_upper
+            for k in range(3):
+                mlo[k] = min(mlo[k], mean[k])
+                mhi[k] = max(mhi[k], mean[k])
+            self.mean_moved = max(mhi[0] - mlo[0], mhi[1] - mlo[1], mhi[2] - mlo[2])
             if self.means == 0:
                 self.first_mean = mean
-            self.displaced = float(np.linalg.norm(mean - self.first_mean))
+            self.last_mean = mean
             self.means += 1
+
+    @property
+    def displaced(self) -> float:
+        """From the first running mean to the latest, metres (0 before the first)."""
+        return float(np.linalg.norm(np.array(self.last_mean) - np.array(self.first_mean)))
 
     @property
     def lived(self) -> float:

@@ -201,9 +201,10 @@ class _Hits:
     speed: list[float] = field(default_factory=list)
     n_cluster_hits: int = 0
     last_extent: float = 0.0
-    lower: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.inf))
-    upper: NDArray[np.float64] = field(default_factory=lambda: np.full(3, -np.inf))
-    spread: float = 0.0  # largest edge of the box around its cluster detections, metres
+    # the box around its cluster detections, per axis (floats: a few comparisons a detection)
+    lower: list[float] = field(default_factory=lambda: [np.inf] * 3)
+    upper: list[float] = field(default_factory=lambda: [-np.inf] * 3)
+    spread: float = 0.0  # largest edge of that box, metres
     cluster_points: list[int] = field(default_factory=list)  # its clusters' sizes, sorted
 
     def add(
@@ -226,9 +227,12 @@ class _Hits:
             insort(self.cluster_points, n)
             self.n_cluster_hits += 1
             self.last_extent = extent
-            np.minimum(self.lower, pos, out=self.lower)
-            np.maximum(self.upper, pos, out=self.upper)
-            self.spread = float(np.max(self.upper - self.lower))
+            lo, hi = self.lower, self.upper
+            for k in range(3):
+                x = float(pos[k])
+                lo[k] = min(lo[k], x)
+                hi[k] = max(hi[k], x)
+            self.spread = max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2])
 
     def may_use_raw(self, min_hits: int, min_spread_m: float, max_size_m: float) -> bool:
         return (
