@@ -152,14 +152,17 @@ def azimuth_groups(cell_deg: float, polar_width: float) -> NDArray[np.int64]:
 
 @numba.njit(cache=True)
 def pool_groups(image: NDArray[np.float32], groups: NDArray[np.int64]) -> NDArray[np.float32]:
-    """(n_el, n_az) image with each row's groups of columns (``azimuth_groups``) set to their
-    minimum: one cell's value on every column of it, so neighbour operations see whole cells."""
+    """(n_el, n_az) image (no NaN) with each row's groups of columns (``azimuth_groups``: each
+    a divisor of n_az) set to their minimum: one cell's value on every column of it, so
+    neighbour operations see whole cells."""
     out = image.copy()
     n_el, n_az = image.shape
     for e in range(n_el):
         g = groups[e]
         if g <= 1:
             continue
+        if n_az % g:
+            raise ValueError("a group of columns must divide the row")
         for a0 in range(0, n_az, g):
             m = image[e, a0]
             for a in range(a0 + 1, a0 + g):

@@ -151,8 +151,8 @@ def track_features(
 
     The logarithms, sums and the constant-velocity fit are numpy's; the order statistics and
     fractions one compiled pass (``_summary``) with numpy's own arithmetic (the median and
-    percentile of ``cldet.core.stats``): the same numbers, at a quarter of the cost of a numpy
-    call per statistic."""
+    percentile of ``cldet.core.stats``): the same numbers (a median of zeros may keep a zero's
+    sign where numpy drops it), at a quarter of the cost of a numpy call per statistic."""
     n = len(rec.frames) if upto is None else max(1, min(upto, len(rec.frames)))
     t = np.ascontiguousarray(times_s[:n], dtype=np.float64)
     pos = np.ascontiguousarray(rec.positions[:n], dtype=np.float64)
@@ -175,12 +175,12 @@ def track_features(
         np.ascontiguousarray(det.height[:n], dtype=np.float64),
         np.ascontiguousarray(det.extent[:n], dtype=np.float64),
         np.ascontiguousarray(det.size[:n], dtype=np.float64),
-        np.log10(np.maximum(det.cross[:n], 1e-6)),
-        np.log1p(rec.n_points[:n]),
-        np.log10(np.maximum(rng, 1e-3)),
+        np.asarray(np.log10(np.maximum(det.cross[:n], 1e-6)), dtype=np.float64),
+        np.asarray(np.log1p(rec.n_points[:n]), dtype=np.float64),
+        np.asarray(np.log10(np.maximum(rng, 1e-3)), dtype=np.float64),
         np.ascontiguousarray(n_mid, dtype=np.int64),
         np.ascontiguousarray(n_avia, dtype=np.int64),
-        np.log10(np.maximum(n_mid, 1) / np.maximum(n_avia, 1)),
+        np.asarray(np.log10(np.maximum(n_mid, 1) / np.maximum(n_avia, 1)), dtype=np.float64),
         np.ascontiguousarray(rec.speed[:n], dtype=np.float64),
         np.ascontiguousarray(rec.nis[:n], dtype=np.float64),
         net,

@@ -99,8 +99,7 @@ class _Pool:
         self.times = times_s
         n = len(tables)
         self.start = np.searchsorted(self.frame, np.arange(n + 1))  # candidates of frame f
-        # the frames that have candidates, in time order, and their times
-        self.frames = np.flatnonzero(np.diff(self.start) > 0)
+        self.frames = np.flatnonzero(np.diff(self.start) > 0)  # those with candidates, in order
         self.used = np.zeros(len(self.frame), dtype=bool)
 
     def nearest(
@@ -138,6 +137,7 @@ def _nearest_kernel(
 ) -> None:
     """``_Pool.nearest`` (fills ``dist`` and ``idx``): a frame holds a few candidates, so every
     one of them is measured."""
+    tol2 = tol * tol  # within tol: compared squared, as a KD-tree's distance bound is
     for q in range(len(points)):
         f = frames[q]
         # the three nearest within tol, nearest first (ties: the lower index)
@@ -147,8 +147,11 @@ def _nearest_kernel(
             dx = pos[c, 0] - points[q, 0]
             dy = pos[c, 1] - points[q, 1]
             dz = pos[c, 2] - points[q, 2]
-            d = np.sqrt(dx * dx + dy * dy + dz * dz)
-            if not d < tol or not d < d3[2]:
+            d2 = dx * dx + dy * dy + dz * dz
+            if not d2 < tol2:
+                continue
+            d = np.sqrt(d2)
+            if not d < d3[2]:
                 continue
             k = 2
             while k > 0 and d < d3[k - 1]:
