@@ -617,7 +617,7 @@ class BackgroundModel:
         if len(points) == 0:
             return
         self._last_points = np.asarray(points)
-        cells, rng = directions if directions is not None else self._cells(points)
+        cells, rng = directions if directions is not None else self.directions(points)
         _nearest_kernel(cells, rng, self._current)
 
     def _refresh(self) -> None:
@@ -712,16 +712,12 @@ class BackgroundModel:
             return np.zeros(0, dtype=np.uint8)
         if not self.warm:
             return np.full(len(points), CORE, dtype=np.uint8)
-        cells, rng = directions if directions is not None else self._cells(points)
+        cells, rng = directions if directions is not None else self.directions(points)
         return self._labels(cells, rng)
 
     def directions(self, points: NDArray[np.floating]) -> Directions:
-        """The direction cells and ranges of points (N,3) on this model's grid, for
-        ``classify`` and ``update`` of the same points (or a subset: index both arrays)."""
-        return self._cells(points)
-
-    def _cells(self, points: NDArray[np.floating]) -> Directions:
-        """``direction_cells`` of points (N,3) on this model's grid: cell indices and ranges."""
+        """``direction_cells`` of points (N,3) on this model's grid: cell indices and ranges
+        (for ``classify`` and ``update`` of the same points, or a subset: index both arrays)."""
         cells, rng, _, _ = direction_cells(points, self.cfg.cell_deg, self.cfg.polar_cell_width)
         return cells, rng
 
@@ -755,7 +751,7 @@ class BackgroundModel:
         el = np.arctan2(p[:, 2], h) - np.radians(self.cfg.cell_deg)
         scale = np.where(h > 0, r * np.cos(el) / np.maximum(h, 1e-9), 0.0)
         probe = np.stack([p[:, 0] * scale, p[:, 1] * scale, r * np.sin(el)], axis=1)
-        cells, rng = self._cells(probe.astype(np.float32))
+        cells, rng = self.directions(probe.astype(np.float32))
         hidden = self._labels(cells, rng) != FOREGROUND
         # ... by the ground: a drone hovering over a car or a pole top has them right below
         behind = self._dilated[cells].astype(np.float64)  # the nearest static surface around

@@ -136,6 +136,7 @@ from cldet.core.tracking import (
     constant_velocity_fit,
     cross_section,
     crowding,
+    widen_box,
 )
 from cldet.errors import FrameOrderError
 from cldet.stamps import NS_PER_S
@@ -253,8 +254,7 @@ class _Evidence:
     last_t_s: float = 0.0
     first_position: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     both: int = 0  # detections seen by both LiDARs in one cluster
-    # the box around its detections and around its running means, per axis (floats: a few
-    # comparisons a detection, without numpy's per-call cost)
+    # the box around its detections and around its running means, per axis (``widen_box``)
     lower: list[float] = field(default_factory=lambda: [np.inf] * 3)
     upper: list[float] = field(default_factory=lambda: [-np.inf] * 3)
     moved: float = 0.0  # largest edge of the box around its detections, metres
@@ -289,11 +289,8 @@ class _Evidence:
         self.hits += 1
         self.both += int(both)
         p = (float(position[0]), float(position[1]), float(position[2]))
-        lo, hi, total = self.lower, self.upper, self.recent_sum
-        for k in range(3):
-            lo[k] = min(lo[k], p[k])
-            hi[k] = max(hi[k], p[k])
-        self.moved = max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2])
+        self.moved = widen_box(self.lower, self.upper, p)
+        total = self.recent_sum
         if len(self.recent) == FIXED_MEAN_HITS:
             old = self.recent[0]
             for k in range(3):
@@ -307,11 +304,7 @@ class _Evidence:
                 total[1] / FIXED_MEAN_HITS,
                 total[2] / FIXED_MEAN_HITS,
             )
-            mlo, mhi = self.mean_lower, self.mean_upper
-            for k in range(3):
-                mlo[k] = min(mlo[k], mean[k])
-                mhi[k] = max(mhi[k], mean[k])
-            self.mean_moved = max(mhi[0] - mlo[0], mhi[1] - mlo[1], mhi[2] - mlo[2])
+            self.mean_moved = widen_box(self.mean_lower, self.mean_upper, mean)
             if self.means == 0:
                 self.first_mean = mean
             self.last_mean = mean

@@ -124,6 +124,16 @@ class _Pool:
         return dist, idx
 
 
+@numba.njit(cache=True, inline="always")
+def _dist2(pos: NDArray[np.float64], c: int, x: float, y: float, z: float) -> float:
+    """Squared distance from candidate ``c`` to (x, y, z), summed x, y, z as numpy and the
+    KD-tree do."""
+    dx = pos[c, 0] - x
+    dy = pos[c, 1] - y
+    dz = pos[c, 2] - z
+    return dx * dx + dy * dy + dz * dz
+
+
 @numba.njit(cache=True)
 def _nearest_kernel(
     frames: NDArray[np.int64],
@@ -144,10 +154,7 @@ def _nearest_kernel(
         d3 = np.full(3, np.inf)
         i3 = np.full(3, -1, dtype=np.int64)
         for c in range(start[f], start[f + 1]):
-            dx = pos[c, 0] - points[q, 0]
-            dy = pos[c, 1] - points[q, 1]
-            dz = pos[c, 2] - points[q, 2]
-            d2 = dx * dx + dy * dy + dz * dz
+            d2 = _dist2(pos, c, points[q, 0], points[q, 1], points[q, 2])
             if not d2 < tol2:
                 continue
             d = np.sqrt(d2)
@@ -199,10 +206,7 @@ def _pairs_kernel(
             lo = min_speed * dt
             for ia in range(start[a], start[a + 1]):
                 for ib in range(start[b], start[b + 1]):
-                    dx = pos[ib, 0] - pos[ia, 0]
-                    dy = pos[ib, 1] - pos[ia, 1]
-                    dz = pos[ib, 2] - pos[ia, 2]
-                    d2 = dx * dx + dy * dy + dz * dz
+                    d2 = _dist2(pos, ib, pos[ia, 0], pos[ia, 1], pos[ia, 2])
                     if d2 <= r * r and np.sqrt(d2) >= lo:
                         if n < len(out):
                             out[n, 0] = ia
@@ -266,7 +270,6 @@ def _count(
         v,
         speed,
         tol,
-        2.0 * tol,  # along-line length of one place
         float(cfg.line_seed_s),  # a seed pair predicts well only near itself
         counts,
     )
@@ -285,14 +288,13 @@ def _count_kernel(
     v: NDArray[np.float64],
     speed: NDArray[np.float64],
     tol: NDArray[np.float64],
-    place: NDArray[np.float64],
     w: float,
     counts: NDArray[np.int64],
 ) -> None:
     """``_count`` (fills ``counts``): for each seed, the frames within ``w`` of it (and whose
     window of ``w`` plus the seed's reach, ``w`` again, holds the seed's start), the nearest
     candidate to the seed's line at the frame's time; one within the seed's tolerance marks
-    the place along the line (``place`` long) it lies in; a static clump counts once."""
+    the place along the line (twice the tolerance long) it lies in; a static clump counts once."""
     places = np.empty(len(frames), dtype=np.int64)
     for s in range(len(a)):
         ta, tb = t[a[s]], t[b[s]]
@@ -310,14 +312,11 @@ def _count_kernel(
                 best = np.inf
                 f = frames[q]
                 for c in range(start[f], start[f + 1]):
-                    dx = pos[c, 0] - px
-                    dy = pos[c, 1] - py
-                    dz = pos[c, 2] - pz
-                    d = np.sqrt(dx * dx + dy * dy + dz * dz)
+                    d = np.sqrt(_dist2(pos, c, px, py, pz))
                     if d < best:
                         best = d
                 if best <= tol[s]:
-                    places[m] = np.int64(np.floor(dt * speed[s] / place[s]))
+                    places[m] = np.int64(np.floor(dt * speed[s] / (2.0 * tol[s])))
                     m += 1
             q += 1
         if m:

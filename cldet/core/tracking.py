@@ -52,6 +52,7 @@ __all__ = [
     "constant_velocity_fit",
     "crowding",
     "cross_section",
+    "widen_box",
 ]
 
 MIN_TRACK_HITS = 2  # detections a candidate track needs to be scored (one is no evidence)
@@ -191,6 +192,19 @@ class ActiveTracks:
     pos_var: NDArray[np.float64]  # (T,) per-axis position variance, m^2
 
 
+def widen_box(
+    lower: list[float], upper: list[float], point: NDArray[np.floating] | tuple[float, ...]
+) -> float:
+    """Widen the box ``lower``..``upper`` (per axis, in place) to hold ``point`` (3,); returns
+    its largest edge. Python floats: a few comparisons a detection, without numpy's per-call
+    cost (min and max are exact, so the box is numpy's to the bit)."""
+    for k in range(3):
+        x = float(point[k])
+        lower[k] = min(lower[k], x)
+        upper[k] = max(upper[k], x)
+    return max(upper[0] - lower[0], upper[1] - lower[1], upper[2] - lower[2])
+
+
 @dataclass
 class _Hits:
     frames: list[int] = field(default_factory=list)
@@ -201,7 +215,7 @@ class _Hits:
     speed: list[float] = field(default_factory=list)
     n_cluster_hits: int = 0
     last_extent: float = 0.0
-    # the box around its cluster detections, per axis (floats: a few comparisons a detection)
+    # the box around its cluster detections, per axis (``widen_box``)
     lower: list[float] = field(default_factory=lambda: [np.inf] * 3)
     upper: list[float] = field(default_factory=lambda: [-np.inf] * 3)
     spread: float = 0.0  # largest edge of that box, metres
@@ -227,12 +241,7 @@ class _Hits:
             insort(self.cluster_points, n)
             self.n_cluster_hits += 1
             self.last_extent = extent
-            lo, hi = self.lower, self.upper
-            for k in range(3):
-                x = float(pos[k])
-                lo[k] = min(lo[k], x)
-                hi[k] = max(hi[k], x)
-            self.spread = max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2])
+            self.spread = widen_box(self.lower, self.upper, pos)
 
     def may_use_raw(self, min_hits: int, min_spread_m: float, max_size_m: float) -> bool:
         return (
