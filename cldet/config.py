@@ -382,6 +382,14 @@ class TrackingConfig(BaseModel):
         " wide blob, and a drone close by joins it, its detection then the blob's centroid"
         " metres away (0: off)",
     )
+    split_rigid: bool = Field(
+        default=True,
+        description="a candidate track whose first or last detections are rigidly fixed (as"
+        " fixed_spread_m judges a whole track, over 2 s or more) is cut there, and the fixed"
+        " part scored as a track of its own: a track that followed the drone past a sign or a"
+        " lamp head and kept the sign is the drone's only up to the sign (false: tracks are"
+        " judged only whole)",
+    )
     chain_head_ratio: float = Field(
         default=0.25,
         ge=0,

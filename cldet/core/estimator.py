@@ -124,6 +124,7 @@ from cldet.core.selection import (
     sampling_jitter,
     score_tracks,
     select_chain,
+    split_rigid,
 )
 from cldet.core.smoothing import decay_tau, extrapolate, rts_smooth, straight_run
 from cldet.core.stats import median
@@ -193,7 +194,7 @@ class SequenceEstimate:
 class Candidates:
     """What ``refine`` chooses from: every candidate track and the frames' cluster tables."""
 
-    records: list[TrackRecord]  # the tracker's tracks and the line search's
+    records: list[TrackRecord]  # the tracker's tracks and the line search's (split_rigid: cut)
     tables: list[ClusterTable]  # one per frame
     times_s: NDArray[np.float64]  # (F,) each frame's observation time, s from the first stamp
     stamps_ns: NDArray[np.int64]  # (F,)
@@ -990,7 +991,8 @@ class TrackEstimator:
 
     # ------------------------------------------------------------------ refine
     def candidates(self) -> Candidates:
-        """Every candidate track after the last frame: the tracker's and the line search's."""
+        """Every candidate track after the last frame: the tracker's and the line search's, a
+        fixed head or tail cut off where another track shows the fixed object (``split_rigid``)."""
         n = len(self._stamps)
         if self._candidates is None or len(self._candidates.tables) != n:
             t_s = self._times[:n].copy()  # observation times (stamp + scan offset)
@@ -999,6 +1001,7 @@ class TrackEstimator:
                 records += find_lines(
                     self._tables, t_s, self.config.tracking, self._tracker.next_id, self._offset_s
                 )
+            records = split_rigid(records, self._tables, t_s, self.config.tracking)
             stamps = np.asarray(self._stamps, dtype=np.int64)
             self._candidates = Candidates(
                 records, list(self._tables), t_s, stamps, self.background.view(onset=True)

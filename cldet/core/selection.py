@@ -40,7 +40,9 @@ each detection weighted by per-detection evidence and the track's factors:
   objects (its 90th percentile sits near the theory's); on the development worlds every drone
   track of 2 s or more wandered at least 1.27 times its jitter, and 1.5 broke three hovers.
   The factor is far below the static one because this is near certainty, not a likelihood: at 0.1 such a track of 80 detections still outweighed a drone
-  hovering low beside a bush (0.1 for its height times 0.6 for static per detection);
+  hovering low beside a bush (0.1 for its height times 0.6 for static per detection).
+  A track's fixed head or tail is cut off first (``split_rigid``) where another track shows a
+  fixed object at the same place: two tracks that swapped a drone and a sign it passed;
 * motion consistency: a detection whose NIS exceeds 7.81 (the 95 % point of chi^2, 3 dof)
   weighs exp(-(NIS - 7.81) / 7.81): smooth motion keeps its weight, erratic speckle or a
   bird's jinks lose it;
@@ -110,6 +112,7 @@ __all__ = [
     "sampling_jitter",
     "score_tracks",
     "select_chain",
+    "split_rigid",
 ]
 
 LEARNED_FLOOR = 0.3
@@ -317,6 +320,125 @@ def rigid_now(
     still to centimetres for one or two."""
     after = t >= t[0] + head_s
     return _is_fixed(t[after], pos[after], fixed_spread(cfg, jitter_m))
+
+
+def _fixed_end(
+    t: NDArray[np.float64],
+    pos: NDArray[np.float64],
+    jitter: NDArray[np.float64],
+    cfg: TrackingConfig,
+) -> int:
+    """Where the rigidly fixed run ending a track's detections (times ``t`` (H,), positions
+    ``pos`` (H,3), sampling jitter ``jitter`` (H,)) begins: the first index of the longest
+    suffix that ``_is_fixed`` judges fixed (``len(t)``: none)."""
+    h = len(t)
+    k = int(np.searchsorted(t, t[-1] - FIXED_JUDGE_S, side="right")) - 1
+    k = min(k, h - 2 * FIXED_MEAN_HITS)
+    if k < 1:
+        return h
+
+    def fixed(i: int) -> bool:
+        return _is_fixed(t[i:], pos[i:], fixed_spread(cfg, median(jitter[i:])))
+
+    if not fixed(k):
+        return h
+    while k > 0 and fixed(k - 1):
+        k -= 1
+    # the rule allows a tenth of the running means astray, so the run may have taken in the
+    # last detections before it: it begins at the first detection on the fixed object (within
+    # twice a single detection's spread, sqrt(FIXED_MEAN_HITS) times the running mean's)
+    centre = column_medians(pos[k:])
+    tol = 2.0 * np.sqrt(FIXED_MEAN_HITS) * fixed_spread(cfg, median(jitter[k:]))
+    while k < h - 1 and np.linalg.norm(pos[k] - centre) > tol:
+        k += 1
+    return k
+
+
+def split_rigid(
+    records: list[TrackRecord],
+    tables: list[ClusterTable],
+    times_s: NDArray[np.float64],
+    cfg: TrackingConfig,
+) -> list[TrackRecord]:
+    """The records with a rigidly fixed head or tail cut off as a record of its own where that
+    part sits on a rigidly fixed object that another track shows (``tracking.split_rigid``).
+
+    A track's gate that followed the drone past a sign (or that was born on a sign and then
+    pulled away by the drone passing it) holds two objects, and as a whole it is neither fixed
+    nor all the drone. Where its first or last detections, over ``FIXED_JUDGE_S`` or more, are
+    fixed as ``_is_fixed`` judges a whole track, and another track, itself fixed as a whole,
+    has its median position within a single detection's spread of theirs, the object there is
+    structure seen on its own: that part is cut off and scored alone (fixed), and the rest
+    links as a track of its own. A drone that flies in and hovers still, or hovers and then
+    leaves, sits where no fixed track was, and is not cut. The new records take ids above
+    every id in ``records``; the rest are returned as they were."""
+    if not cfg.split_rigid or cfg.fixed_spread_m <= 0:
+        return records
+    # per track, its fixed runs: (where it begins, where it ends, median position, tolerance)
+    runs: dict[int, list[tuple[int, int, NDArray[np.float64], float]]] = {}
+    for rec in records:
+        t = times_s[rec.frames]
+        h = len(t)
+        if h < 2 * FIXED_MEAN_HITS or t[-1] - t[0] < FIXED_JUDGE_S:
+            continue
+        extent = np.array(
+            [
+                0.0 if c < 0 else tables[f].extent[c]
+                for f, c in zip(rec.frames, rec.clusters, strict=True)
+            ]
+        )
+        jitter = sampling_jitter(extent, rec.n_points)
+        tail = _fixed_end(t, rec.positions, jitter, cfg)
+        head = h - _fixed_end(-t[::-1], rec.positions[::-1], jitter[::-1], cfg)
+        ends = [(0, h)] if tail == 0 else [(a, b) for a, b in ((0, head), (tail, h)) if b > a]
+        for a, b in ends:
+            tol = 2.0 * np.sqrt(FIXED_MEAN_HITS) * fixed_spread(cfg, median(jitter[a:b]))
+            runs.setdefault(rec.track_id, []).append(
+                (a, b, column_medians(rec.positions[a:b]), tol)
+            )
+
+    def elsewhere(track_id: int, centre: NDArray[np.float64], tol: float) -> bool:
+        return any(
+            np.linalg.norm(at - centre) <= max(tol, other)
+            for tid, own in runs.items()
+            if tid != track_id
+            for _, _, at, other in own
+        )
+
+    cuts: dict[int, list[int]] = {}
+    for rec in records:
+        h = len(rec.frames)
+        own = [
+            (a, b)
+            for a, b, at, tol in runs.get(rec.track_id, ())
+            if elsewhere(rec.track_id, at, tol)
+        ]
+        bounds = sorted({0, h} | {a for a, _ in own} | {b for _, b in own})
+        if len(bounds) > 2 and all(b - a < h for a, b in own):
+            cuts[rec.track_id] = bounds
+    next_id = max((r.track_id for r in records), default=-1) + 1
+    out: list[TrackRecord] = []
+    for rec in records:
+        at_cuts = cuts.get(rec.track_id)
+        if at_cuts is None:
+            out.append(rec)
+            continue
+        for k, (a, b) in enumerate(zip(at_cuts[:-1], at_cuts[1:], strict=True)):
+            nis = rec.nis[a:b].copy()
+            nis[0] = np.nan  # each part is born again
+            out.append(
+                TrackRecord(
+                    track_id=rec.track_id if k == 0 else next_id,
+                    frames=rec.frames[a:b],
+                    clusters=rec.clusters[a:b],
+                    positions=rec.positions[a:b],
+                    n_points=rec.n_points[a:b],
+                    nis=nis,
+                    speed=rec.speed[a:b],
+                )
+            )
+            next_id += k > 0
+    return out
 
 
 def link_reach(

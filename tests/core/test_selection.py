@@ -102,3 +102,66 @@ def test_rigid_now_forgives_a_tracks_head_and_not_a_hover_that_keeps_still_a_whi
     drone = drone + rng.normal(0.0, 0.003, drone.shape)
     assert not rigid_now(t6, drone, 0.0, tc, 1.0)
     assert rigid_now(t6, drone, 0.0, tc, 3.8)
+
+
+def _record(positions: np.ndarray, track_id: int = 7, first_frame: int = 0) -> Any:
+    """A raw-gate track record (no cluster tables needed) of one detection per 0.1 s frame."""
+    from cldet.core.tracking import TrackRecord
+
+    h = len(positions)
+    return TrackRecord(
+        track_id=track_id,
+        frames=np.arange(first_frame, first_frame + h, dtype=np.int64),
+        clusters=np.full(h, -1, dtype=np.int64),
+        positions=positions,
+        n_points=np.full(h, 12, dtype=np.int64),
+        nis=np.r_[np.nan, np.ones(h - 1)],
+        speed=np.full(h, 1.0),
+    )
+
+
+def test_tracks_that_swap_a_drone_and_a_sign_are_cut_where_each_sits_on_the_sign() -> None:
+    # a sign (5 mm of noise) tracked on its own for 2.5 s; a drone flies past it at 3 m/s, and
+    # the two tracks swap objects: the drone's keeps the sign for 3 s, the sign's follows the
+    # drone away. Each is cut where it sits on the sign: the sign's parts judged fixed, the
+    # drone's not, and the drone's parts are whole tracks again for the chain to link
+    from cldet.core.selection import _is_fixed, fixed_spread, split_rigid
+
+    rng = np.random.default_rng(3)
+    tc = load_config().tracking
+    sign_at = np.array([4.0, 1.0, 3.0])
+    fly_in = sign_at + np.outer(np.arange(-25, 0) * 0.1, [3.0, 0.0, 0.0])
+    fly_out = sign_at + np.outer(np.arange(1, 31) * 0.1, [0.0, 3.0, 0.0])
+    drone_then_sign = _record(np.vstack([fly_in, sign_at + rng.normal(0, 0.005, (30, 3))]), 7)
+    sign_then_drone = _record(np.vstack([sign_at + rng.normal(0, 0.005, (25, 3)), fly_out]), 9)
+    times = np.arange(60) * 0.1
+    parts = split_rigid([drone_then_sign, sign_then_drone], [], times, tc)
+    assert [(p.track_id, len(p.frames)) for p in parts] == [(7, 25), (10, 30), (9, 25), (11, 30)]
+    assert all(np.isnan(p.nis[0]) for p in parts)  # each part is born again
+    for whole, pieces in ((drone_then_sign, parts[:2]), (sign_then_drone, parts[2:])):
+        np.testing.assert_array_equal(np.concatenate([p.frames for p in pieces]), whole.frames)
+    fixed = [_is_fixed(times[p.frames], p.positions, fixed_spread(tc, 0.0)) for p in parts]
+    assert fixed == [False, True, True, False]
+
+
+def test_split_rigid_leaves_a_still_hover_a_wholly_fixed_track_and_the_switch_off_alone() -> None:
+    # a drone that flies in and then hovers still to millimetres, where no other track shows a
+    # fixed object, is not cut (its hover may be as still as a sign: only the sign's own track
+    # tells structure). A sign's track fixed from end to end is judged whole. Switched off, a
+    # track that ends on a sign another track shows is left whole too
+    from cldet.core.selection import split_rigid
+
+    rng = np.random.default_rng(4)
+    tc = load_config().tracking
+    spot = np.array([6.0, -2.0, 4.0])
+    fly = spot + np.outer(np.arange(-20, 0) * 0.1, [0.0, 2.5, 0.0])
+    hover = _record(np.vstack([fly, spot + rng.normal(0.0, 0.005, (30, 3))]))
+    elsewhere = _record(spot + [3.0, 0.0, 0.0] + rng.normal(0.0, 0.005, (40, 3)), track_id=9)
+    times = np.arange(60) * 0.1
+    assert split_rigid([hover, elsewhere], [], times, tc) == [hover, elsewhere]
+    sign = _record(spot + rng.normal(0.0, 0.005, (25, 3)), track_id=9, first_frame=50)
+    times = np.arange(80) * 0.1
+    off = load_config(overrides={"tracking": {"split_rigid": False}}).tracking
+    assert split_rigid([hover, sign], [], times, off) == [hover, sign]
+    cut = split_rigid([hover, sign], [], times, tc)
+    assert [len(p.frames) for p in cut] == [20, 30, 25] and cut[2] is sign
