@@ -322,6 +322,13 @@ def rigid_now(
     return _is_fixed(t[after], pos[after], fixed_spread(cfg, jitter_m))
 
 
+def _detection_tolerance(cfg: TrackingConfig, jitter: NDArray[np.float64]) -> float:
+    """How far one detection of a rigidly fixed object may lie from its median: twice a single
+    detection's spread, ``sqrt(FIXED_MEAN_HITS)`` times that of the running mean
+    (``fixed_spread``, with the detections' sampling ``jitter``)."""
+    return 2.0 * float(np.sqrt(FIXED_MEAN_HITS)) * fixed_spread(cfg, median(jitter))
+
+
 def _fixed_end(
     t: NDArray[np.float64],
     pos: NDArray[np.float64],
@@ -345,10 +352,9 @@ def _fixed_end(
     while k > 0 and fixed(k - 1):
         k -= 1
     # the rule allows a tenth of the running means astray, so the run may have taken in the
-    # last detections before it: it begins at the first detection on the fixed object (within
-    # twice a single detection's spread, sqrt(FIXED_MEAN_HITS) times the running mean's)
+    # last detections before it: it begins at the first detection on the fixed object
     centre = column_medians(pos[k:])
-    tol = 2.0 * np.sqrt(FIXED_MEAN_HITS) * fixed_spread(cfg, median(jitter[k:]))
+    tol = _detection_tolerance(cfg, jitter[k:])
     while k < h - 1 and np.linalg.norm(pos[k] - centre) > tol:
         k += 1
     return k
@@ -392,7 +398,7 @@ def split_rigid(
         head = h - _fixed_end(-t[::-1], rec.positions[::-1], jitter[::-1], cfg)
         ends = [(0, h)] if tail == 0 else [(a, b) for a, b in ((0, head), (tail, h)) if b > a]
         for a, b in ends:
-            tol = 2.0 * np.sqrt(FIXED_MEAN_HITS) * fixed_spread(cfg, median(jitter[a:b]))
+            tol = _detection_tolerance(cfg, jitter[a:b])
             runs.setdefault(rec.track_id, []).append(
                 (a, b, column_medians(rec.positions[a:b]), tol)
             )
