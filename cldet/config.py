@@ -385,8 +385,9 @@ class TrackingConfig(BaseModel):
     split_rigid: bool = Field(
         default=True,
         description="a candidate track whose first or last detections are rigidly fixed (as"
-        " fixed_spread_m judges a whole track, over 2 s or more) is cut there, and the fixed"
-        " part scored as a track of its own: a track that followed the drone past a sign or a"
+        " fixed_spread_m judges a whole track, over 2 s or more) where another track shows a"
+        " fixed object at the same place is cut there, and the fixed part scored as a track of"
+        " its own: a track that followed the drone past a sign or a"
         " lamp head and kept the sign is the drone's only up to the sign (false: tracks are"
         " judged only whole)",
     )

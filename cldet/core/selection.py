@@ -372,10 +372,10 @@ def split_rigid(
     A track's gate that followed the drone past a sign (or that was born on a sign and then
     pulled away by the drone passing it) holds two objects, and as a whole it is neither fixed
     nor all the drone. Where its first or last detections, over ``FIXED_JUDGE_S`` or more, are
-    fixed as ``_is_fixed`` judges a whole track, and another track, itself fixed as a whole,
-    has its median position within a single detection's spread of theirs, the object there is
-    structure seen on its own: that part is cut off and scored alone (fixed), and the rest
-    links as a track of its own. A drone that flies in and hovers still, or hovers and then
+    fixed as ``_is_fixed`` judges a whole track, and a fixed run of another track (the whole of
+    it, or its head or tail judged so) has its median position within a single detection's
+    spread of theirs, the object there is structure seen on its own: that part is cut off and
+    scored alone (fixed), and the rest links as a track of its own. A drone that flies in and hovers still, or hovers and then
     leaves, sits where no fixed track was, and is not cut. The new records take ids above
     every id in ``records``; the rest are returned as they were."""
     if not cfg.split_rigid or cfg.fixed_spread_m <= 0:
@@ -395,8 +395,11 @@ def split_rigid(
         )
         jitter = sampling_jitter(extent, rec.n_points)
         tail = _fixed_end(t, rec.positions, jitter, cfg)
-        head = h - _fixed_end(-t[::-1], rec.positions[::-1], jitter[::-1], cfg)
-        ends = [(0, h)] if tail == 0 else [(a, b) for a, b in ((0, head), (tail, h)) if b > a]
+        if tail == 0:  # fixed as a whole
+            ends = [(0, h)]
+        else:
+            head = h - _fixed_end(-t[::-1], rec.positions[::-1], jitter[::-1], cfg)
+            ends = [(a, b) for a, b in ((0, head), (tail, h)) if b > a]
         for a, b in ends:
             tol = _detection_tolerance(cfg, jitter[a:b])
             runs.setdefault(rec.track_id, []).append(
