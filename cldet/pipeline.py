@@ -128,7 +128,7 @@ def read_frames(
             for cloud in reader_clouds(reader, sensors.lidar):
                 if not lidar_frame:
                     lidar_frame.append(cloud.frame_id)
-                yield Cloud(stamp_ns=cloud.stamp_ns, points=cloud.points)
+                yield Cloud(stamp_ns=cloud.stamp_ns, points=cloud.points, times=cloud.times)
 
         def avia(topic: str) -> Iterator[Cloud]:
             # into the LiDAR's frame through the log's /tf_static when it connects them, else by
@@ -136,7 +136,7 @@ def read_frames(
             # first Avia cloud
             into = lambda: lidar_frame[0] if lidar_frame else None  # noqa: E731
             for cloud in reader_clouds(reader, topic, target_frame=into, fallback=extrinsic):
-                yield Cloud(stamp_ns=cloud.stamp_ns, points=cloud.points)
+                yield Cloud(stamp_ns=cloud.stamp_ns, points=cloud.points, times=cloud.times)
 
         positions = (
             reader_positions(reader, sensors.truth)

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import re
 
+import numpy as np
+from numpy.typing import NDArray
+
 from cldet.errors import DatasetError
 
 # ASCII digits only, whole string (``$`` would also accept a trailing newline).
@@ -46,3 +49,22 @@ def format_stamp(stamp_ns: int) -> str:
         raise ValueError(f"stamp must be non-negative, got {stamp_ns} ns")
     seconds, rest = divmod(stamp_ns, NS_PER_S)
     return f"{seconds}.{rest // 1_000:06d}"
+
+
+SCAN_PERIOD_S = 0.1
+"""A Livox scan (Mid-360 and Avia at 10 Hz) lasts 100 ms from its stamp."""
+
+
+def row_times(
+    rows: NDArray[np.integer], n_rows: int, scan_s: float = SCAN_PERIOD_S
+) -> NDArray[np.float32]:
+    """Firing time after the stamp, seconds, of the rows ``rows`` of a scan array of ``n_rows``.
+
+    A Livox driver's array holds its scan's rows in firing order, a row for every shot (the
+    MMAUD files keep the no-return rows as zeros, in 96-row packets), at an even rate over the
+    scan: row i of n fired ``i / n * scan_s`` after the stamp. A drone at 16 m/s moves 1.6 m in a
+    scan, so a point dated at the scan's middle is off by up to 0.8 m along its path.
+    """
+    if n_rows <= 0:
+        return np.zeros(0, dtype=np.float32)
+    return (np.asarray(rows, dtype=np.float64) * (scan_s / n_rows)).astype(np.float32)

@@ -17,6 +17,9 @@ class Cloud:
 
     stamp_ns: int
     points: NDArray[np.float32]  # (N, 3) x, y, z metres in the sensor's frame; valid rows only
+    # (N,) each point's firing time after ``stamp_ns``, seconds (the scan lasts ~100 ms); None:
+    # not recorded (the estimator then dates every point at ``frames.scan_offset_s``)
+    times: NDArray[np.float32] | None = None
 
 
 @dataclass(frozen=True)
@@ -27,6 +30,8 @@ class LidarFrame:
     mid360: NDArray[np.float32]  # (N, 3) valid points, metres
     avia: NDArray[np.float32]  # (M, 3) valid points, metres; (0, 3) when no Avia frame is paired
     avia_stamp_ns: int | None = None  # stamp of the paired Avia frame, None when there is none
+    mid360_times: NDArray[np.float32] | None = None  # (N,) point times after stamp_ns, s (Cloud)
+    avia_times: NDArray[np.float32] | None = None  # (M,) after avia_stamp_ns, s; None: unknown
 
 
 @dataclass(frozen=True)

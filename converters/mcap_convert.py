@@ -136,7 +136,8 @@ def convert_sequence(
             writer.write_transforms(topics.TF, item.stamp_ns, sensor_tree())
             tree_written = True
         if isinstance(item, Cloud):
-            writer.write_cloud(topic, item.stamp_ns, item.points, topics.MODALITY_FRAMES[modality])
+            frame = topics.MODALITY_FRAMES[modality]
+            writer.write_timed_cloud(topic, item.stamp_ns, item.points, item.times, frame)
         elif isinstance(item, PositionSample):
             writer.write_pose(topic, item.stamp_ns, item.position, topics.FRAME_MID360)
         elif isinstance(item, ClassSample):

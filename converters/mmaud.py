@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cldet.errors import DatasetError
-from cldet.stamps import parse_stamp
+from cldet.stamps import parse_stamp, row_times
 from cldet.types import ClassSample, Cloud, ImageFrame, PositionSample
 
 __all__ = [
@@ -48,11 +48,13 @@ __all__ = [
     "iter_sequence",
     "list_stamped_files",
     "load_cloud",
+    "load_timed_cloud",
     "scan_sequences",
 ]
 
 SPLITS = ("train", "val", "test")
 CLOUD_MODALITIES = ("lidar_360", "livox_avia", "radar_enhance_pcl")
+LIDAR_MODALITIES = ("lidar_360", "livox_avia")  # arrays of a scan's shots in firing order
 MODALITIES = CLOUD_MODALITIES + ("ground_truth", "class", "Image")
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -423,7 +425,12 @@ def _check_finite(array: NDArray[Any], source: NDArray[Any], path: Path) -> None
 
 
 def load_cloud(path: Path) -> NDArray[np.float32]:
-    """Load one point-cloud file and keep its valid rows.
+    """Load one point-cloud file and keep its valid rows (``load_timed_cloud`` without times)."""
+    return load_timed_cloud(path)[0]
+
+
+def load_timed_cloud(path: Path) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """Load one point-cloud file, keep its valid rows, and date them by their rows.
 
     Rows that are exactly zero, ``(0, 0, 0)`` in any sign of zero (the Mid-360's and the Avia's
     "no return"), are dropped. A 1-D array of shape ``(0,)`` (the radar's empty frame) is an
@@ -433,7 +440,9 @@ def load_cloud(path: Path) -> NDArray[np.float32]:
         path: a ``<stamp>.npy`` file holding an ``(N, 3)`` real array, x, y, z metres.
 
     Returns:
-        ``(M, 3)`` float32, C-contiguous, metres, M <= N; ``(0, 3)`` for an empty frame.
+        ``(M, 3)`` float32, C-contiguous, metres, M <= N; ``(0, 3)`` for an empty frame; and
+        ``(M,)`` float32, each kept row's firing time after the file's stamp, seconds, were the
+        rows a LiDAR's scan (``cldet.stamps.row_times``: row i of N at i / N of 100 ms).
 
     Raises:
         DatasetError: the file is unreadable, truncated or corrupt; the array is not ``(N, 3)``
@@ -444,7 +453,7 @@ def load_cloud(path: Path) -> NDArray[np.float32]:
     expected = "an (N, 3) float array"
     _check_real(array, path, expected)
     if array.shape == (0,):  # the radar's empty frame
-        return np.empty((0, 3), dtype=np.float32)
+        return np.empty((0, 3), dtype=np.float32), np.empty(0, dtype=np.float32)
     if array.ndim != 2 or array.shape[1] != 3:
         raise DatasetError(f"{path}: expected {expected}, got shape {array.shape}")
     # Valid rows: any coordinate non-zero (-0.0 != 0 is False, so both zero forms are dropped).
@@ -452,10 +461,11 @@ def load_cloud(path: Path) -> NDArray[np.float32]:
     valid = array[:, 0] != 0
     valid |= array[:, 1] != 0
     valid |= array[:, 2] != 0
+    rows = np.flatnonzero(valid)
     with np.errstate(over="ignore"):  # beyond float32 range -> inf, reported just below
-        points = array.take(np.flatnonzero(valid), axis=0).astype(np.float32, copy=False)
+        points = array.take(rows, axis=0).astype(np.float32, copy=False)
     _check_finite(points, array, path)
-    return np.ascontiguousarray(points)
+    return np.ascontiguousarray(points), row_times(rows, len(array))
 
 
 def _load_position(path: Path) -> NDArray[np.float64]:
@@ -532,7 +542,9 @@ def iter_clouds(seq: SequenceRef, modality: str) -> Iterator[Cloud]:
             f"{modality!r} is not a point-cloud modality: expected one of {', '.join(CLOUD_MODALITIES)}"
         )
     files = list_stamped_files(_require(seq, modality))
-    return (Cloud(stamp_ns=stamp_ns, points=load_cloud(path)) for stamp_ns, path in files)
+    if modality not in LIDAR_MODALITIES:  # the radar's rows are targets, not a scan's shots
+        return (Cloud(stamp_ns=stamp_ns, points=load_cloud(path)) for stamp_ns, path in files)
+    return (Cloud(stamp_ns, *load_timed_cloud(path)) for stamp_ns, path in files)
 
 
 def iter_positions(folder: Path) -> Iterator[PositionSample]:

@@ -167,7 +167,7 @@ def convert_bag(
                     if matrix is not None:
                         points = ros.transform_points(matrix, points)
                 frame = topics.FRAME_RADAR if channel == topics.RADAR else topics.FRAME_MID360
-                writer.write_cloud(channel, stamp_ns, points, frame)
+                writer.write_timed_cloud(channel, stamp_ns, points, item.times, frame)
             else:
                 writer.write_pose(channel, stamp_ns, item, topics.FRAME_MID360)
             counts[channel] += 1

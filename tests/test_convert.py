@@ -105,6 +105,13 @@ def expected_points(path: Path) -> np.ndarray:
     return a[~np.all(a == 0, axis=1)].astype(np.float32)
 
 
+def expected_times(path: Path) -> np.ndarray:
+    """Each kept row's firing time, the obvious way: row i of N fired at i / N of 100 ms."""
+    a = np.load(path)
+    rows = [i for i in range(len(a)) if np.any(a[i] != 0)]
+    return np.array([i * (0.1 / len(a)) for i in rows], dtype=np.float32)
+
+
 def raw_messages(log: Path, topic: str) -> list:
     with open(log, "rb") as f:
         return [m for _, _, m in make_reader(f).iter_messages(topics=[topic])]
@@ -130,16 +137,29 @@ def check_log_with(reader: LogReader, log: Path, seq_dir: Path, *, images: bool)
             cloud = PointCloud.FromString(message.data)
             assert cloud.timestamp.ToNanoseconds() == stamp
             assert cloud.frame_id == ("radar" if folder == "radar_enhance_pcl" else "mid360")
-            assert cloud.point_stride == 12
-            assert [(f.name, f.offset) for f in cloud.fields] == [("x", 0), ("y", 4), ("z", 8)]
+            xyz = [("x", 0), ("y", 4), ("z", 8)]
             assert cloud.pose.HasField("position") and cloud.pose.orientation.w == 1.0
             want = expected_points(path)
-            assert cloud.data == want.tobytes(), path  # float32 bit for bit
+            if folder == "radar_enhance_pcl":  # a radar's rows are targets, not timed shots
+                assert cloud.point_stride == 12
+                assert [(f.name, f.offset) for f in cloud.fields] == xyz
+                assert cloud.data == want.tobytes(), path  # float32 bit for bit
+                continue
+            # a LiDAR's rows: each point's firing time after the stamp rides along (Cloud.times)
+            assert cloud.point_stride == 16
+            assert [(f.name, f.offset) for f in cloud.fields] == [*xyz, ("time", 12)]
+            timed = np.column_stack([want, expected_times(path)]).astype(np.float32)
+            assert cloud.data == timed.tobytes(), path  # float32 bit for bit
         clouds = list(reader.iter_clouds(topic))  # and through cldet's own reader
         for cloud_read, (stamp, path) in zip(clouds, files, strict=True):
             assert cloud_read.stamp_ns == stamp
             want = expected_points(path)
             assert np.ascontiguousarray(cloud_read.points).tobytes() == want.tobytes()
+            if folder == "radar_enhance_pcl":
+                assert cloud_read.times is None
+            else:
+                assert cloud_read.times is not None
+                np.testing.assert_array_equal(cloud_read.times, expected_times(path))
     if (seq_dir / "ground_truth").is_dir():
         files = stamped_files(seq_dir / "ground_truth", ".npy")
         got = list(reader.iter_positions(tp.GROUND_TRUTH))

@@ -32,6 +32,7 @@ from cldet.io import (
     read_metadata,
 )
 from cldet.io import topics as tp
+from cldet.io.mcap_read import decode_timed
 from cldet.simulate.sensors import encode_png
 from cldet.types import Cluster, Estimate, Source
 
@@ -347,7 +348,7 @@ def test_a_bug_is_not_reported_as_a_corrupt_log(
     def broken(data: bytes) -> np.ndarray:
         raise TypeError("a bug")
 
-    monkeypatch.setattr(mcap_read, "_xyz_view", broken)
+    monkeypatch.setattr(mcap_read, "decode_timed", broken)
     with pytest.raises(TypeError, match="a bug"):
         list(iter_clouds(sample_log[0], tp.LIDAR_360))
 
@@ -539,3 +540,27 @@ def test_own_chunk_reader_equals_the_mcap_library(tmp_path: Path, compression: s
     for cloud, (stamp, points) in zip(clouds, expected, strict=True):
         assert cloud.stamp_ns == stamp
         np.testing.assert_array_equal(cloud.points, points)
+
+
+def test_a_clouds_point_times_ride_along_as_a_time_field(tmp_path: Path) -> None:
+    """``write_timed_cloud`` adds a FLOAT32 ``time`` field after x, y, z; cldet's readers give
+    the times back bit for bit (``Cloud.times``); a cloud written without times reads as None;
+    a ``time`` field beyond the point stride is a malformed message."""
+    path = tmp_path / "log.mcap"
+    pts = np.arange(12, dtype=np.float32).reshape(4, 3)
+    times = np.array([0.0, 0.025, 0.05, 0.099], dtype=np.float32)
+    with open(path, "wb") as f, LogWriter(f) as writer:
+        writer.write_timed_cloud(tp.LIDAR_360, T0, pts, times, "mid360")
+        writer.write_timed_cloud(tp.LIDAR_360, T0 + 100_000_000, pts, None, "mid360")
+    timed, untimed = iter_clouds(path, tp.LIDAR_360)
+    assert np.ascontiguousarray(timed.points).tobytes() == pts.tobytes()
+    assert timed.times is not None and timed.times.tobytes() == times.tobytes()
+    assert untimed.times is None
+    with open(path, "rb") as f:
+        first = next(make_reader(f).iter_messages(topics=[tp.LIDAR_360]))[2]
+    header = PointCloud.FromString(first.data)
+    assert [(f.name, f.offset) for f in header.fields][-1] == ("time", 12)
+    assert header.point_stride == 16
+    header.fields[-1].offset = 16  # past the 16-byte stride
+    with pytest.raises(ValueError, match="beyond the stride"):
+        decode_timed(header.SerializeToString())

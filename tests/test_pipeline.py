@@ -259,6 +259,9 @@ def test_annotate_reads_the_log_once_and_writes_the_causal_estimate(
     assert [t.stamp_ns for t in truth] == [t.stamp_ns for t in expected]
     np.testing.assert_array_equal([t.position for t in truth], [t.position for t in expected])
     assert len(frames) == list_topics(source_log)[topics.LIDAR_360]
+    # each point dated where in its scan it was fired (converted from the arrays' rows)
+    assert all(f.mid360_times is not None and len(f.mid360_times) == len(f.mid360) for f in frames)
+    assert all(f.avia_times is not None for f in frames if f.avia_stamp_ns is not None)
 
     out = tmp_path / "once.mcap"
     report = annotate_log(source_log, output=out, write_rrd=False)

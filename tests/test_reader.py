@@ -180,8 +180,11 @@ def test_iter_clouds(train_seq: SequenceRef) -> None:
     assert first.stamp_ns == ns(T0, 100_000)
     np.testing.assert_array_equal(first.points, [[1, 2, 3], [4, 5, 6]])
     np.testing.assert_array_equal(second.points, [[2, 4, 6], [8, 10, 12]])
+    # each kept row dated by its row in the scan's array: row i of 3 at i / 3 of 100 ms
+    np.testing.assert_allclose(first.times, [0.0, 2 / 3 * 0.1], rtol=1e-6)
     (avia,) = iter_clouds(train_seq, "livox_avia")
     np.testing.assert_array_equal(avia.points, [[0.5, 0.5, 9.0]])
+    np.testing.assert_allclose(avia.times, [0.05], rtol=1e-6)  # row 1 of 2
 
 
 def test_iter_sequence_merges_in_time_order(train_seq: SequenceRef) -> None:

@@ -51,6 +51,11 @@ def test_the_byte_reader_matches_rosbags(stores: Stores, encoding: str, package:
                 assert got.frame_id == expected.frame_id == "f" * frame_length
                 np.testing.assert_array_equal(got.points, expected.points)
                 assert len(got.points) == (n - 2 if n > 3 else n)
+                # each point's offset_time (ns after the timebase; point i has i) as seconds
+                kept = [i for i in range(n) if np.isfinite(points[i]).all()]
+                assert got.times is not None and expected.times is not None
+                np.testing.assert_array_equal(got.times, expected.times)
+                np.testing.assert_allclose(got.times, np.array(kept) * 1e-9, rtol=1e-6)
 
 
 @pytest.mark.parametrize(

@@ -22,8 +22,10 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    ``cldet.core.tracking.carve_tracked``: rain near the sensor chains into one wide cluster
    that a close drone joins);
 4. every cluster seeds or extends a candidate Kalman track (``cldet.core.tracking``), at the
-   time its points were taken (the stamp plus ``frames.scan_offset_s``, the middle of the
-   scan); a confirmed moving track that gets no cluster continues on the raw points near its
+   time its points were taken: their mean firing time where the clouds record it
+   (``frames.point_times``, ``fuse_timed``), else the stamp plus ``frames.scan_offset_s``,
+   the middle of the scan; the refinement's smoother measures each detection at its own time
+   too; a confirmed moving track that gets no cluster continues on the raw points near its
    prediction; the points of confirmed small moving tracks are withheld from the background
    (``background.protect_tracks``), so a drone that stops to hover is not learned: once their
    half-second mean lies ``background.protect_min_moved_m`` from its first value, or while
@@ -104,7 +106,7 @@ from cldet.core.features import (
     track_detections,
     track_features,
 )
-from cldet.core.frames import valid_points
+from cldet.core.frames import valid_mask
 from cldet.core.ground import GroundModel
 from cldet.core.lines import find_lines
 from cldet.core.model import LearnedModel
@@ -150,6 +152,7 @@ __all__ = [
     "TrackEstimator",
     "TrackEvent",
     "fuse_points",
+    "fuse_timed",
 ]
 
 _LOST_AFTER_S = 0.5  # a gap without detection longer than this is reported as lost/reacquired
@@ -347,12 +350,55 @@ class _Evidence:
 
 def fuse_points(frame: LidarFrame, cfg: CldetConfig) -> tuple[NDArray[np.float32], int]:
     """Both LiDARs' valid points in one (N,3) array, Mid-360 first; and the Mid-360 count."""
+    pts, n_mid, _ = fuse_timed(frame, cfg)
+    return pts, n_mid
+
+
+def _timed(
+    points: NDArray[np.float32],
+    times: NDArray[np.float32] | None,
+    shift_s: float,
+    cfg: CldetConfig,
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """One LiDAR's valid points and their times after the frame's stamp: the recorded times
+    shifted by ``shift_s`` (its own stamp's lag), else the configured ``scan_offset_s``."""
     fc = cfg.frames
-    mid = valid_points(frame.mid360, fc.min_range_m, fc.max_range_m)
-    avia = valid_points(frame.avia, fc.min_range_m, fc.max_range_m)
+    p = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
+    keep = valid_mask(p, fc.min_range_m, fc.max_range_m)
+    if times is None or len(times) != len(p) or not fc.point_times:
+        t = np.full(len(p), fc.scan_offset_s, dtype=np.float32)
+    else:
+        t = np.asarray(times, dtype=np.float32) + np.float32(shift_s)
+    if keep.all():
+        return p, t
+    return p[keep], t[keep]
+
+
+def fuse_timed(
+    frame: LidarFrame, cfg: CldetConfig
+) -> tuple[NDArray[np.float32], int, NDArray[np.float32]]:
+    """``fuse_points`` and each point's time after the frame's stamp, seconds: its firing time
+    where the cloud recorded it (``Cloud.times``; the Avia's counted from its own stamp), else
+    the middle of the scan (``frames.scan_offset_s``)."""
+    mid, t_mid = _timed(frame.mid360, frame.mid360_times, 0.0, cfg)
+    lag = 0.0 if frame.avia_stamp_ns is None else (frame.avia_stamp_ns - frame.stamp_ns) / NS_PER_S
+    avia, t_avia = _timed(frame.avia, frame.avia_times, lag, cfg)
     if len(avia) == 0:
-        return mid, len(mid)
-    return np.concatenate([mid, avia]), len(mid)
+        return mid, len(mid), t_mid
+    return np.concatenate([mid, avia]), len(mid), np.concatenate([t_mid, t_avia])
+
+
+def _cluster_lags(
+    labels: NDArray[np.integer], times: NDArray[np.float32], k: int, offset_s: float
+) -> NDArray[np.float64]:
+    """(K,) each cluster's mean point time after the frame's observation time (its stamp plus
+    ``offset_s``), seconds: where in the scan its object was seen (0 where the points' times
+    were not recorded: they are all dated at the offset)."""
+    ok = labels >= 0
+    lab = labels[ok]
+    n = np.bincount(lab, minlength=k)[:k]
+    total = np.bincount(lab, weights=times[ok].astype(np.float64), minlength=k)[:k]
+    return total / np.maximum(n, 1) - offset_s
 
 
 class TrackEstimator:
@@ -409,7 +455,7 @@ class TrackEstimator:
         check_order(self._stamps[-1] if self._stamps else None, frame.stamp_ns)
         cfg = self.config
         index = len(self._stamps)
-        pts, n_mid = fuse_points(frame, cfg)
+        pts, n_mid, p_times = fuse_timed(frame, cfg)
         bg = self.background
         bg.advance(frame.stamp_ns)
         cells, ranges = bg.directions(pts)  # for classify and update alike
@@ -447,7 +493,10 @@ class TrackEstimator:
         if len(clusters):
             crowd = crowding(table.centroid, table.n_points, cfg.tracking.crowd_radius_m)
             screened = bg.view().screened(table.centroid)
-            table = replace(table, height=self._heights(clusters), crowd=crowd, screened=screened)
+            dt = _cluster_lags(labels, p_times[fg_idx], len(clusters), self._offset_s)
+            table = replace(
+                table, height=self._heights(clusters), crowd=crowd, screened=screened, dt=dt
+            )
         self._stamps.append(frame.stamp_ns)
         self._tables.append(table)
         if index == len(self._times):
@@ -1036,6 +1085,7 @@ def refine_candidates(
         return SequenceEstimate(est, {}, (ev,))
 
     z = np.full((n, 3), np.nan)
+    lag = np.zeros(n)  # each detection's time after its frame's observation time
     sigma = np.full(n, tc.meas_sigma_m)
     n_points = np.zeros(n, dtype=np.int64)
     chosen: dict[int, int] = {}
@@ -1043,9 +1093,11 @@ def refine_candidates(
     events: list[TrackEvent] = []
     for k, (tr, i0, i1) in enumerate(chain):
         rec = tr.record
+        lags = rec.lags()
         for h in range(i0, i1):
             f, c = int(rec.frames[h]), int(rec.clusters[h])
             z[f] = rec.positions[h]
+            lag[f] = lags[h]
             n_points[f] = int(rec.n_points[h])
             if c >= 0:
                 chosen[int(stamps[f])] = c
@@ -1064,15 +1116,18 @@ def refine_candidates(
     idx = np.flatnonzero(have)
     first, last = int(idx[0]), int(idx[-1])
     seg = slice(first, last + 1)
-    sm = rts_smooth(t_s[seg], z[seg], sigma[seg], cfg.smoothing.accel_psd, tc.init_speed_sigma)
+    # when each detection was seen (its points' mean time; kept in order where an Avia
+    # detection's lag overtakes the next frame's); frames without one: their observation time
+    t_obs = np.maximum.accumulate(t_s + lag)
+    sm = rts_smooth(t_obs[seg], z[seg], sigma[seg], cfg.smoothing.accel_psd, tc.init_speed_sigma)
     pos = np.zeros((n, 3))
     var = np.zeros(n)
     # the smoother's states are at the points' time: move them back to the stamps
-    pos[seg] = sm.position - sm.velocity * offset_s
+    pos[seg] = sm.position - sm.velocity * (t_obs[seg] - t_s[seg] + offset_s)[:, None]
     var[seg] = sm.pos_var
     q = cfg.smoothing.accel_psd
     scan_s = float(np.median(np.diff(t_s))) if n > 1 else 0.0  # a scan lasts a frame period
-    ends = _extrapolation_ends(t_s[idx], z[idx], sm.position, sm.velocity, scan_s, cfg.smoothing)
+    ends = _extrapolation_ends(t_obs[idx], z[idx], sm.position, sm.velocity, scan_s, cfg.smoothing)
     if cand.view is not None and cfg.smoothing.unseen_check_s > 0:
         tr0, i0, _ = chain[0]
         c0 = int(tr0.record.clusters[i0])
@@ -1092,7 +1147,7 @@ def refine_candidates(
     for f in list(range(first)) + list(range(last + 1, n)):
         k_end = 0 if f < first else -1
         origin, velocity, hold_s = ends[k_end]
-        dt = t_s[f] - t_s[first if f < first else last] - offset_s
+        dt = t_s[f] - t_obs[first if f < first else last] - offset_s
         pos[f], var[f] = extrapolate(origin, velocity, sm.cov[k_end], dt, q, taus[k_end], hold_s)
     pos = apply_bias(pos, cfg.bias)
 

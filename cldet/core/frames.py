@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from cldet.types import Cloud, LidarFrame
 
-__all__ = ["pair_frames", "valid_points"]
+__all__ = ["pair_frames", "valid_mask", "valid_points"]
 
 _EMPTY = np.zeros((0, 3), dtype=np.float32)
 
@@ -63,14 +63,21 @@ def pair_frames(
             if best is None or abs(a.stamp_ns - t) < abs(best.stamp_ns - t):
                 best = a
         if best is None:
-            yield LidarFrame(stamp_ns=t, mid360=m.points, avia=_EMPTY, avia_stamp_ns=None)
+            yield LidarFrame(
+                stamp_ns=t, mid360=m.points, avia=_EMPTY, avia_stamp_ns=None, mid360_times=m.times
+            )
         else:
             # consume it and every older one (they are nearer to this frame than to any later)
             while pending and pending[0] is not best:
                 pending.popleft()
             pending.popleft()
             yield LidarFrame(
-                stamp_ns=t, mid360=m.points, avia=best.points, avia_stamp_ns=best.stamp_ns
+                stamp_ns=t,
+                mid360=m.points,
+                avia=best.points,
+                avia_stamp_ns=best.stamp_ns,
+                mid360_times=m.times,
+                avia_times=best.times,
             )
 
 
@@ -82,6 +89,14 @@ def _keep_mask(p: NDArray[np.float32], min2: float, max2: float) -> NDArray[np.b
         r2 = p[i, 0] * p[i, 0] + p[i, 1] * p[i, 1] + p[i, 2] * p[i, 2]
         keep[i] = np.isfinite(r2) and r2 > 0.0 and r2 >= min2 and r2 <= max2
     return keep
+
+
+def valid_mask(
+    points: NDArray[np.floating], min_range_m: float = 0.0, max_range_m: float = np.inf
+) -> NDArray[np.bool_]:
+    """(N,) which rows of ``points`` (N,3) ``valid_points`` keeps."""
+    p = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
+    return _keep_mask(p, float(min_range_m) ** 2, float(max_range_m) ** 2)
 
 
 def valid_points(

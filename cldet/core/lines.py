@@ -72,7 +72,7 @@ class _Pool:
     def __init__(
         self, tables: list[ClusterTable], times_s: NDArray[np.float64], cfg: TrackingConfig
     ) -> None:
-        frames, clusters, positions = [], [], []
+        frames, clusters, positions, lags = [], [], [], []
         for f, table in enumerate(tables):
             if not len(table):
                 continue
@@ -88,6 +88,7 @@ class _Pool:
             frames.append(np.full(len(keep), f, dtype=np.int64))
             clusters.append(keep.astype(np.int64))
             positions.append(table.centroid[keep])
+            lags.append(table.lags()[keep])
         self.frame = np.concatenate(frames) if frames else np.zeros(0, dtype=np.int64)
         self.cluster = np.concatenate(clusters) if clusters else np.zeros(0, dtype=np.int64)
         self.pos = (
@@ -96,6 +97,10 @@ class _Pool:
             else np.zeros((0, 3))
         )
         self.t = times_s[self.frame]
+        # when in its scan each candidate was seen (the found line's fit uses it; the seeds
+        # and counts, whose tolerance allows for a scan's smear, do not: two candidates of
+        # neighbouring frames may be seen almost at once)
+        self.lag = np.concatenate(lags) if lags else np.zeros(0)
         self.times = times_s
         n = len(tables)
         self.start = np.searchsorted(self.frame, np.arange(n + 1))  # candidates of frame f
@@ -439,7 +444,7 @@ def find_lines(
             continue  # taken, or it would grow into a line already grown
         idx = _grow(pool, seeds[s], times_s, cfg, half_scan_s)
         tried[idx] = True
-        t, p = pool.t[idx], pool.pos[idx]
+        t, p = pool.t[idx] + pool.lag[idx], pool.pos[idx]
         p0, v, tm = constant_velocity_fit(t, p)
         speed = float(np.linalg.norm(v))
         tol = _tolerance(speed, cfg, half_scan_s)
@@ -466,6 +471,7 @@ def find_lines(
                 ),
                 nis=nis,
                 speed=np.full(len(idx), speed),
+                dt=pool.lag[idx] if np.any(pool.lag[idx]) else None,
             )
         )
     return lines

@@ -444,6 +444,7 @@ def split_rigid(
                     n_points=rec.n_points[a:b],
                     nis=nis,
                     speed=rec.speed[a:b],
+                    dt=None if rec.dt is None else rec.dt[a:b],
                 )
             )
             next_id += k > 0

@@ -9,7 +9,10 @@ whole-sequence evidence. Per frame:
    PSD ``accel_psd``);
 2. cluster j may join track i if its normalised innovation squared |z - p|^2 / S is below
    ``gate_chi2`` (chi^2 with 3 dof; S = predicted position variance + centroid variance)
-   and |z - p| is below ``max_gate_m``;
+   and |z - p| is below ``max_gate_m``. A cluster seen ``lag`` after the frame's time (its
+   points' mean firing time, ``ClusterTable.dt``) measures the position then: p + lag v, with
+   S = [1, lag] P [1, lag]^T + R, and the update uses that H (a fast drone moves metres within
+   a scan; without it each detection's place in the scan reads as noise of the whole track);
 3. one-to-one assignment minimising the summed NIS (Hungarian, ``scipy``);
 4. unassigned clusters start new tracks (zero velocity, speed sigma ``init_speed_sigma``);
 5. a track not updated for ``max_miss_s`` ends;
@@ -76,10 +79,17 @@ class ClusterTable:
     screened: NDArray[np.bool_] | None = None
     # (K,) the Mid-360 points' summed squared deviations from their mean z, m^2 (Cluster)
     mid360_z_ss: NDArray[np.float64] | None = None
+    # (K,) when the cluster was seen: its points' mean time after the frame's observation time,
+    # s (a fast drone moves metres within a scan); None: at it
+    dt: NDArray[np.float64] | None = None
 
     def crowds(self) -> NDArray[np.int64]:
         """(K,) how many other clusters of the frame lie near each one (0: not counted)."""
         return np.zeros(len(self), dtype=np.int64) if self.crowd is None else self.crowd
+
+    def lags(self) -> NDArray[np.float64]:
+        """(K,) each cluster's observation time after the frame's, seconds (0: unknown)."""
+        return np.zeros(len(self)) if self.dt is None else self.dt
 
     def sizes(self) -> NDArray[np.float64]:
         """(K,3) each cluster's box edges (x, y, z), metres (NaN: unknown)."""
@@ -147,6 +157,13 @@ class TrackRecord:
     n_points: NDArray[np.int64]  # (H,) points in the cluster / in the raw gate
     nis: NDArray[np.float64]  # (H,) normalised innovation squared of each update (NaN at birth)
     speed: NDArray[np.float64]  # (H,) filtered speed after each update, m/s
+    # (H,) each detection's time after its frame's observation time, s (``ClusterTable.dt``);
+    # None: at it
+    dt: NDArray[np.float64] | None = None
+
+    def lags(self) -> NDArray[np.float64]:
+        """(H,) each detection's time after its frame's observation time, seconds."""
+        return np.zeros(len(self.frames)) if self.dt is None else self.dt
 
     @property
     def raw(self) -> NDArray[np.bool_]:
@@ -213,6 +230,7 @@ class _Hits:
     n_points: list[int] = field(default_factory=list)
     nis: list[float] = field(default_factory=list)
     speed: list[float] = field(default_factory=list)
+    dt: list[float] = field(default_factory=list)
     n_cluster_hits: int = 0
     last_extent: float = 0.0
     # the box around its cluster detections, per axis (``widen_box``)
@@ -230,8 +248,10 @@ class _Hits:
         nis: float,
         speed: float,
         extent: float = 0.0,
+        dt: float = 0.0,
     ) -> None:
         self.frames.append(frame)
+        self.dt.append(dt)
         self.clusters.append(cluster)
         self.positions.append(pos)
         self.n_points.append(n)
@@ -300,15 +320,23 @@ class CandidateTracker:
         self._t = t_s
         k = len(table)
         z = table.centroid
+        lag = table.lags()  # each cluster seen this long after t_s: measures p + lag * v
         r2 = cfg.meas_sigma_m**2
         assigned = np.zeros(k, dtype=bool)
         n_tr = len(self._ids)
         updated = np.zeros(n_tr, dtype=bool)
         owner = np.full(k, -1, dtype=np.int64)
         if n_tr and k:
-            diff = z[None, :, :] - self._x[:, None, :, 0]  # (T,K,3)
+            pred = self._x[:, None, :, 0] + lag[None, :, None] * self._x[:, None, :, 1]
+            diff = z[None, :, :] - pred  # (T,K,3)
             d2 = np.einsum("tkd,tkd->tk", diff, diff)
-            s = self._P[:, 0, 0][:, None] + r2  # (T,1)
+            # H = [1, lag]: S = P00 + 2 lag P01 + lag^2 P11 + R, per track and cluster
+            P = self._P
+            s = (
+                P[:, 0, 0][:, None]
+                + lag[None, :] * (2.0 * P[:, 0, 1][:, None] + lag[None, :] * P[:, 1, 1][:, None])
+                + r2
+            )  # (T,K)
             nis = d2 / s
             # the hard gate grows with the time unseen at the drone's top speed: a fast drone
             # seen every few scans jumps metres between its detections
@@ -322,10 +350,11 @@ class CandidateTracker:
                 rows, cols = rows[good], cols[good]
                 if len(rows):
                     nu = diff[rows, cols]  # (A,3)
-                    s_a = s[rows, 0]
-                    gain = self._P[rows, :, 0] / s_a[:, None]  # (A,2)
+                    s_a = s[rows, cols]
+                    hp = self._P[rows, 0, :] + lag[cols][:, None] * self._P[rows, 1, :]  # H P
+                    gain = hp / s_a[:, None]  # (A,2): P H^T / S
                     self._x[rows] += nu[:, :, None] * gain[:, None, :]
-                    self._P[rows] -= gain[:, :, None] * self._P[rows, 0, :][:, None, :]
+                    self._P[rows] -= gain[:, :, None] * hp[:, None, :]
                     self._last_t[rows] = t_s
                     speeds = np.linalg.norm(self._x[rows, :, 1], axis=1)
                     for a, (i, j) in enumerate(zip(rows, cols, strict=True)):
@@ -337,6 +366,7 @@ class CandidateTracker:
                             float(nis[i, j]),
                             float(speeds[a]),
                             float(table.extent[j]),
+                            float(lag[j]),
                         )
                         self._judge_raw(int(self._ids[i]))
                     assigned[cols] = True
@@ -348,6 +378,7 @@ class CandidateTracker:
         if len(new):
             m = len(new)
             x = np.zeros((m, 3, 2))
+            # a track is born where its first cluster was seen, at rest, its speed unknown
             x[:, :, 0] = z[new]
             P = np.tile(np.diag([r2, cfg.init_speed_sigma**2]), (m, 1, 1))
             ids = np.arange(self._next_id, self._next_id + m)
@@ -362,6 +393,7 @@ class CandidateTracker:
                     float("nan"),
                     0.0,
                     float(table.extent[j]),
+                    float(lag[j]),
                 )
                 self._hits[int(tid)] = hits
                 if cfg.raw_min_cluster_hits <= 1:
@@ -546,6 +578,7 @@ def _to_record(tid: int, h: _Hits) -> TrackRecord:
         n_points=np.asarray(h.n_points, dtype=np.int64),
         nis=np.asarray(h.nis, dtype=np.float64),
         speed=np.asarray(h.speed, dtype=np.float64),
+        dt=np.asarray(h.dt, dtype=np.float64) if any(h.dt) else None,
     )
 
 

@@ -55,6 +55,7 @@ __all__ = [
     "CORRUPT_ERRORS",
     "LogReader",
     "decode_cloud",
+    "decode_timed",
     "decode_xyz",
     "iter_classes",
     "iter_cloud_fields",
@@ -171,9 +172,36 @@ def decode_cloud(data: bytes) -> tuple[int, dict[str, NDArray[np.float32]]]:
     return stamp_ns, {name: records[name] for name in names}
 
 
-def _xyz_view(data: bytes) -> NDArray[np.float32]:
-    """The (N, 3) x, y, z of a serialized PointCloud, a view when x, y, z are packed first."""
-    return decode_xyz(data)[2]
+def decode_timed(data: bytes) -> tuple[int, str, NDArray[np.float32], NDArray[np.float32] | None]:
+    """``decode_xyz`` and the points' times: the ``time`` field (FLOAT32 seconds after the stamp,
+    ``topics.POINT_TIME_FIELD``), a read-only view like the points; None where the message has none."""
+    header_bytes, start, length = _split_data_field(data)
+    header = PointCloud.FromString(header_bytes)
+    stamp_ns = header.timestamp.seconds * NS_PER_S + header.timestamp.nanos
+    stride = header.point_stride
+    layout = {f.name: (f.offset, f.type) for f in header.fields}
+    if any(layout.get(c, (None, None))[1] != _FLOAT32 for c in "xyz"):
+        raise ValueError("x, y, z are not all FLOAT32 fields")
+    if stride <= 0 or length % stride:
+        raise ValueError(f"point_stride {stride} does not divide the {length} data bytes")
+    n = length // stride
+    times = None
+    if layout.get(topics.POINT_TIME_FIELD, (None, None))[1] == _FLOAT32:
+        offset = layout[topics.POINT_TIME_FIELD][0]
+        if offset + 4 > stride:
+            raise ValueError(
+                f"field {topics.POINT_TIME_FIELD!r} at offset {offset} lies beyond the stride"
+            )
+        dtype = np.dtype(
+            {"names": ["t"], "formats": ["<f4"], "offsets": [offset], "itemsize": stride}
+        )
+        times = np.frombuffer(data, dtype=dtype, count=n, offset=start)["t"]
+    if layout["x"][0] == 0 and layout["y"][0] == 4 and layout["z"][0] == 8 and stride % 4 == 0:
+        flat = np.frombuffer(data, dtype="<f4", count=n * stride // 4, offset=start)
+        return stamp_ns, header.frame_id, flat.reshape(n, stride // 4)[:, :3], times
+    _, columns = decode_cloud(data)
+    xyz = np.stack([columns["x"], columns["y"], columns["z"]], axis=1)
+    return stamp_ns, header.frame_id, xyz, times
 
 
 def decode_xyz(data: bytes) -> tuple[int, str, NDArray[np.float32]]:
@@ -185,21 +213,8 @@ def decode_xyz(data: bytes) -> tuple[int, str, NDArray[np.float32]]:
     Raises:
         ValueError: the message is malformed or x, y, z are not all FLOAT32 fields.
     """
-    header_bytes, start, length = _split_data_field(data)
-    header = PointCloud.FromString(header_bytes)
-    stamp_ns = header.timestamp.seconds * NS_PER_S + header.timestamp.nanos
-    stride = header.point_stride
-    layout = {f.name: (f.offset, f.type) for f in header.fields}
-    if any(layout.get(c, (None, None))[1] != _FLOAT32 for c in "xyz"):
-        raise ValueError("x, y, z are not all FLOAT32 fields")
-    if stride <= 0 or length % stride:
-        raise ValueError(f"point_stride {stride} does not divide the {length} data bytes")
-    n = length // stride
-    if layout["x"][0] == 0 and layout["y"][0] == 4 and layout["z"][0] == 8 and stride % 4 == 0:
-        flat = np.frombuffer(data, dtype="<f4", count=n * stride // 4, offset=start)
-        return stamp_ns, header.frame_id, flat.reshape(n, stride // 4)[:, :3]
-    _, columns = decode_cloud(data)
-    return stamp_ns, header.frame_id, np.stack([columns["x"], columns["y"], columns["z"]], axis=1)
+    stamp_ns, frame_id, xyz, _ = decode_timed(data)
+    return stamp_ns, frame_id, xyz
 
 
 _DECOMPRESS: dict[str, Callable[[bytes, int], bytes]] = {
@@ -631,17 +646,18 @@ class LogReader:
     def iter_clouds(
         self, topic: str, *, start_ns: int | None = None, end_ns: int | None = None
     ) -> Iterator[Cloud]:
-        """The clouds of a ``foxglove.PointCloud`` topic: (N, 3) float32 read-only views.
+        """The clouds of a ``foxglove.PointCloud`` topic: (N, 3) float32 read-only views (and the
+        points' times where the messages have a ``time`` field).
 
         Raises:
             LogError: the topic is missing, is not a point cloud topic, or a message is corrupt.
         """
         for message, _ in self._decoded(topic, (topics.SCHEMA_POINT_CLOUD,), start_ns, end_ns):
             try:
-                points = _xyz_view(message.data)
+                _, _, points, times = decode_timed(message.data)
             except CORRUPT_ERRORS as err:
                 raise self.message_error(topic, message, err) from err
-            yield Cloud(stamp_ns=message.log_time, points=points)
+            yield Cloud(stamp_ns=message.log_time, points=points, times=times)
 
     def iter_cloud_fields(
         self, topic: str, *, start_ns: int | None = None, end_ns: int | None = None

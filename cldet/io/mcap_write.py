@@ -364,6 +364,22 @@ class LogWriter:
             layout.serialize(int(stamp_ns), data.reshape(-1).view(np.uint8).data),
         )
 
+    def write_timed_cloud(
+        self,
+        topic: str,
+        stamp_ns: int,
+        points: ArrayLike,
+        times: ArrayLike | None,
+        frame_id: str,
+    ) -> None:
+        """``write_cloud`` of (N, 3) ``points``, with each point's firing time after the stamp
+        (``times``, (N,) seconds) as a ``time`` field when there are times (``Cloud.times``)."""
+        if times is None:
+            self.write_cloud(topic, stamp_ns, points, frame_id)
+            return
+        timed = np.column_stack([np.asarray(points).reshape(-1, 3), np.asarray(times)])
+        self.write_cloud(topic, stamp_ns, timed, frame_id, topics.TIMED_CLOUD_FIELDS)
+
     def write_colored_cloud(
         self,
         topic: str,

@@ -153,6 +153,7 @@ class StampedCloud:
     stamp_ns: int  # the header stamp (a Livox CustomMsg: its timebase), integer ns
     frame_id: str
     points: NDArray[np.float32]  # (N, 3) x, y, z metres, finite rows only
+    times: NDArray[np.float32] | None = None  # (N,) firing times after stamp_ns, s (Cloud.times)
 
 
 def header_stamp_ns(header: Any) -> int:
@@ -162,10 +163,21 @@ def header_stamp_ns(header: Any) -> int:
 
 def _finite(points: NDArray[np.float32]) -> NDArray[np.float32]:
     """The rows of (N, 3) ``points`` without a NaN or infinity (``points`` itself when all are)."""
+    return _finite_timed(points, None)[0]
+
+
+def _finite_timed(
+    points: NDArray[np.float32], times: NDArray[np.float32] | None
+) -> tuple[NDArray[np.float32], NDArray[np.float32] | None]:
+    """``_finite`` and the kept rows' ``times`` (N,), where there are any."""
     finite = np.isfinite(points)
     if finite.all():  # one pass over the flat array: far cheaper than a per-row reduction
-        return points
-    return points[finite.all(axis=1)]
+        return points, times
+    keep = finite.all(axis=1)
+    return points[keep], None if times is None else times[keep]
+
+
+_NS = 1e-9  # a Livox point's offset_time is in nanoseconds after the message's timebase
 
 
 def _point_cloud2_xyz(msg: Any) -> NDArray[np.float32]:
@@ -250,8 +262,11 @@ def ros_cloud(msg: Any, typename: str) -> StampedCloud:
         points = _point_cloud2_xyz(msg)
         stamp = header_stamp_ns(msg.header)
     elif typename in LIVOX_CUSTOM:
-        points = _finite(_point_list_xyz(msg.points))
+        offsets = np.array([p.offset_time for p in msg.points], dtype=np.float64) * _NS
+        points, times = _finite_timed(_point_list_xyz(msg.points), offsets.astype(np.float32))
         stamp = int(msg.timebase)
+        frame_id = msg.header.frame_id.lstrip("/")
+        return StampedCloud(stamp_ns=stamp, frame_id=frame_id, points=points, times=times)
     elif typename == POINT_CLOUD:
         points = _finite(_point_list_xyz(msg.points))
         stamp = header_stamp_ns(msg.header)
@@ -329,7 +344,8 @@ def livox_decoder(
 
 def _livox_points(
     raw: bytes, start: int, n: int, stride: int, order: str, what: str
-) -> NDArray[np.float32]:
+) -> tuple[NDArray[np.float32], NDArray[np.float32] | None]:
+    """The finite points of a CustomMsg's point array and their times after its timebase, s."""
     need = start + (n - 1) * stride + _LIVOX_XYZ_OFFSET + 12 if n else start
     if len(raw) < need:
         raise ValueError(
@@ -337,9 +353,9 @@ def _livox_points(
         )
     dtype = np.dtype(
         {
-            "names": ["x", "y", "z"],
-            "formats": [order + "f4"] * 3,
-            "offsets": [_LIVOX_XYZ_OFFSET, _LIVOX_XYZ_OFFSET + 4, _LIVOX_XYZ_OFFSET + 8],
+            "names": ["t", "x", "y", "z"],
+            "formats": [order + "u4"] + [order + "f4"] * 3,
+            "offsets": [0, _LIVOX_XYZ_OFFSET, _LIVOX_XYZ_OFFSET + 4, _LIVOX_XYZ_OFFSET + 8],
             "itemsize": _LIVOX_XYZ_OFFSET + 12,
         }
     )
@@ -347,7 +363,8 @@ def _livox_points(
     points = np.empty((n, 3), np.float32)
     for i, axis in enumerate("xyz"):
         points[:, i] = records[axis]
-    return _finite(points)
+    times = (records["t"].astype(np.float64) * _NS).astype(np.float32)
+    return _finite_timed(points, times)
 
 
 def _livox_cdr(raw: bytes) -> StampedCloud:
@@ -362,8 +379,8 @@ def _livox_cdr(raw: bytes) -> StampedCloud:
     timebase, _point_num = struct.unpack_from(order + "QI", raw, pos)
     pos += 8 + 4 + 4  # timebase, point_num, lidar_id and rsvd[3]
     (n,) = struct.unpack_from(order + "I", raw, pos)
-    points = _livox_points(raw, pos + 4, n, _CDR_POINT_STRIDE, order, "Livox CustomMsg")
-    return StampedCloud(stamp_ns=int(timebase), frame_id=frame_id.lstrip("/"), points=points)
+    points, times = _livox_points(raw, pos + 4, n, _CDR_POINT_STRIDE, order, "Livox CustomMsg")
+    return StampedCloud(int(timebase), frame_id.lstrip("/"), points, times)
 
 
 def _livox_ros1(raw: bytes) -> StampedCloud:
@@ -374,8 +391,8 @@ def _livox_ros1(raw: bytes) -> StampedCloud:
     timebase, _point_num = struct.unpack_from("<QI", raw, pos)
     pos += 8 + 4 + 4
     (n,) = struct.unpack_from("<I", raw, pos)
-    points = _livox_points(raw, pos + 4, n, _ROS1_POINT_STRIDE, "<", "Livox CustomMsg")
-    return StampedCloud(stamp_ns=int(timebase), frame_id=frame_id.lstrip("/"), points=points)
+    points, times = _livox_points(raw, pos + 4, n, _ROS1_POINT_STRIDE, "<", "Livox CustomMsg")
+    return StampedCloud(int(timebase), frame_id.lstrip("/"), points, times)
 
 
 def position_of(msg: Any, typename: str) -> tuple[int, NDArray[np.float64]]:

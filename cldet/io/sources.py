@@ -25,7 +25,7 @@ from rosbags.serde import SerdeError
 
 from cldet.errors import LogError
 from cldet.io import ros, topics
-from cldet.io.mcap_read import CORRUPT_ERRORS, LogReader, decode_xyz, open_log
+from cldet.io.mcap_read import CORRUPT_ERRORS, LogReader, decode_timed, open_log
 from cldet.types import PositionSample
 
 __all__ = [
@@ -178,8 +178,8 @@ def _iter_clouds(reader: LogReader, topic: str) -> Iterator[ros.StampedCloud]:
 
     def convert(kind: str, schema: Any, channel: Any, data: bytes) -> ros.StampedCloud:
         if kind == topics.SCHEMA_POINT_CLOUD:
-            stamp_ns, frame_id, points = decode_xyz(data)
-            return ros.StampedCloud(stamp_ns, frame_id, points)
+            stamp_ns, frame_id, points, times = decode_timed(data)
+            return ros.StampedCloud(stamp_ns, frame_id, points, times)
         cloud: ros.StampedCloud = decoders.decode(schema, channel, data)
         return cloud
 
@@ -254,7 +254,7 @@ def reader_clouds(
             yield cloud
             continue
         points = ros.transform_points(matrix, cloud.points)
-        yield ros.StampedCloud(cloud.stamp_ns, target_frame, points)
+        yield ros.StampedCloud(cloud.stamp_ns, target_frame, points, cloud.times)
 
 
 def iter_log_positions(path: str | os.PathLike[str], topic: str) -> Iterator[PositionSample]:

@@ -67,6 +67,11 @@ MODALITY_FRAMES: Final[dict[str, str]] = {
 MESSAGE_ENCODING: Final = "protobuf"
 SCHEMA_ENCODING: Final = "protobuf"
 SCHEMA_POINT_CLOUD: Final = "foxglove.PointCloud"
+POINT_TIME_FIELD: Final = "time"
+"""A ``foxglove.PointCloud`` FLOAT32 field cldet writes after x, y, z where the source recorded
+it: each point's firing time after the message's ``timestamp``, seconds (``Cloud.times``).
+Viewers ignore it; ``cldet annotate`` dates the points by it."""
+TIMED_CLOUD_FIELDS = ("x", "y", "z", POINT_TIME_FIELD)
 SCHEMA_POSE_IN_FRAME: Final = "foxglove.PoseInFrame"
 SCHEMA_POSES_IN_FRAME: Final = "foxglove.PosesInFrame"
 SCHEMA_COMPRESSED_IMAGE: Final = "foxglove.CompressedImage"

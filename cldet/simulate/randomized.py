@@ -54,7 +54,7 @@ from cldet.simulate.sensors import (
 )
 from cldet.simulate.terrain import TerrainScene, build_site
 from cldet.simulate.world import World, draw_world
-from cldet.stamps import format_stamp
+from cldet.stamps import format_stamp, row_times
 from cldet.types import Cloud, LidarFrame
 
 F64 = NDArray[np.float64]
@@ -244,10 +244,12 @@ def _world(world: int | World) -> World:
 
 
 def as_cloud(stamp_ns: int, array: F64) -> Cloud:
-    """The cloud a reader gets from one file's array: its non-zero rows as float32 (metres)."""
-    valid = np.any(array != 0, axis=1)
-    points = array.take(np.flatnonzero(valid), axis=0).astype(np.float32, copy=False)
-    return Cloud(stamp_ns=int(stamp_ns), points=np.ascontiguousarray(points))
+    """The cloud a reader gets from one file's array: its non-zero rows as float32 (metres),
+    dated by their rows (``row_times``)."""
+    rows = np.flatnonzero(np.any(array != 0, axis=1))
+    points = array.take(rows, axis=0).astype(np.float32, copy=False)
+    times = row_times(rows, len(array))
+    return Cloud(stamp_ns=int(stamp_ns), points=np.ascontiguousarray(points), times=times)
 
 
 def simulate_world_frames(

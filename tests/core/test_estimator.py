@@ -23,6 +23,7 @@ from cldet.core.estimator import (
     TrackEstimator,
     _Evidence,
     fuse_points,
+    fuse_timed,
 )
 from cldet.core.frames import pair_frames, valid_points
 from cldet.core.methods import estimate_sequence, make_estimator
@@ -1190,3 +1191,31 @@ def test_a_known_mount_is_the_estimators_ground_from_the_start() -> None:
     assert ground.fitted and ground.offset == 2.4
     np.testing.assert_allclose(ground.normal, [0.0, 0.0, 1.0])
     assert not TrackEstimator(load_config()).background.ground.fitted  # fitted to the data
+
+
+def test_each_point_is_dated_at_its_firing_time_where_recorded() -> None:
+    """``fuse_timed``: the Mid-360's recorded times as they are, the Avia's counted from its own
+    stamp (14 ms later), the rows the range filter drops dropped with their times; a cloud
+    without times, or ``frames.point_times`` off (the default), dates every point at
+    ``scan_offset_s``."""
+    off = CldetConfig()
+    cfg = off.model_copy(update={"frames": off.frames.model_copy(update={"point_times": True})})
+    mid = np.array([[5.0, 0, 0], [0.1, 0, 0], [0, 6.0, 0]], dtype=np.float32)  # 0.1 m: too near
+    avia = np.array([[0, 0, 30.0]], dtype=np.float32)
+    frame = LidarFrame(
+        stamp_ns=1_000_000_000,
+        mid360=mid,
+        avia=avia,
+        avia_stamp_ns=1_014_000_000,
+        mid360_times=np.array([0.01, 0.02, 0.09], dtype=np.float32),
+        avia_times=np.array([0.05], dtype=np.float32),
+    )
+    pts, n_mid, times = fuse_timed(frame, cfg)
+    assert n_mid == 2 and len(pts) == 3
+    np.testing.assert_allclose(times, [0.01, 0.09, 0.064], rtol=1e-5)
+    for untimed, c in (
+        (LidarFrame(1_000_000_000, mid, avia, 1_014_000_000), cfg),
+        (frame, off),
+    ):
+        _, _, times = fuse_timed(untimed, c)
+        np.testing.assert_allclose(times, cfg.frames.scan_offset_s)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from cldet.core.frames import pair_frames, valid_points
+from cldet.stamps import row_times
 from cldet.types import Cloud
 
 MS = 1_000_000
@@ -65,3 +66,20 @@ def test_valid_points_drops_zero_nonfinite_and_out_of_range() -> None:
     assert out.dtype == np.float32
     np.testing.assert_array_equal(out, [[1, 0, 0]])
     assert valid_points(p[:3]).shape == (1, 3)
+
+
+def test_row_times_date_a_scan_array_by_its_rows() -> None:
+    """Row i of an N-row Livox array fired i / N of the 100 ms scan after the stamp."""
+    times = row_times(np.array([0, 1, 10_032, 20_063]), 20_064)
+    np.testing.assert_allclose(times, [0.0, 0.1 / 20_064, 0.05, 0.1 * 20_063 / 20_064], rtol=1e-6)
+    assert times.dtype == np.float32
+    assert row_times(np.zeros(0, dtype=np.int64), 0).shape == (0,)
+
+
+def test_pairing_keeps_each_clouds_point_times() -> None:
+    mid = Cloud(100 * MS, np.ones((2, 3), np.float32), np.array([0.01, 0.09], np.float32))
+    avia = Cloud(114 * MS, np.ones((1, 3), np.float32), np.array([0.05], np.float32))
+    (frame,) = pair_frames(iter([mid]), iter([avia]))
+    assert frame.mid360_times is mid.times and frame.avia_times is avia.times
+    (alone,) = pair_frames(iter([Cloud(100 * MS, np.ones((1, 3), np.float32))]), iter([]))
+    assert alone.mid360_times is None and alone.avia_times is None
