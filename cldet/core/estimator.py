@@ -378,8 +378,8 @@ def fuse_timed(
     frame: LidarFrame, cfg: CldetConfig
 ) -> tuple[NDArray[np.float32], int, NDArray[np.float32]]:
     """``fuse_points`` and each point's time after the frame's stamp, seconds: its firing time
-    where the cloud recorded it (``Cloud.times``; the Avia's counted from its own stamp), else
-    the middle of the scan (``frames.scan_offset_s``)."""
+    where the cloud recorded it (``Cloud.times``; the Avia's counted from its own stamp) and
+    ``frames.point_times`` is on, else the middle of the scan (``frames.scan_offset_s``)."""
     mid, t_mid = _timed(frame.mid360, frame.mid360_times, 0.0, cfg)
     lag = 0.0 if frame.avia_stamp_ns is None else (frame.avia_stamp_ns - frame.stamp_ns) / NS_PER_S
     avia, t_avia = _timed(frame.avia, frame.avia_times, lag, cfg)
@@ -493,7 +493,12 @@ class TrackEstimator:
         if len(clusters):
             crowd = crowding(table.centroid, table.n_points, cfg.tracking.crowd_radius_m)
             screened = bg.view().screened(table.centroid)
-            dt = _cluster_lags(labels, p_times[fg_idx], len(clusters), self._offset_s)
+            # the clusters' lags (None: all seen at the frame's time, the points undated)
+            dt = (
+                _cluster_lags(labels, p_times[fg_idx], len(clusters), self._offset_s)
+                if cfg.frames.point_times
+                else None
+            )
             table = replace(
                 table, height=self._heights(clusters), crowd=crowd, screened=screened, dt=dt
             )

@@ -258,6 +258,7 @@ def ros_cloud(msg: Any, typename: str) -> StampedCloud:
             PointCloud2 without x, y, z, a point_step smaller than its fields, truncated data).
     """
     typename = normalize_type(typename)
+    times = None
     if typename == POINT_CLOUD2:
         points = _point_cloud2_xyz(msg)
         stamp = header_stamp_ns(msg.header)
@@ -265,8 +266,6 @@ def ros_cloud(msg: Any, typename: str) -> StampedCloud:
         offsets = np.array([p.offset_time for p in msg.points], dtype=np.float64) * _NS
         points, times = _finite_timed(_point_list_xyz(msg.points), offsets.astype(np.float32))
         stamp = int(msg.timebase)
-        frame_id = msg.header.frame_id.lstrip("/")
-        return StampedCloud(stamp_ns=stamp, frame_id=frame_id, points=points, times=times)
     elif typename == POINT_CLOUD:
         points = _finite(_point_list_xyz(msg.points))
         stamp = header_stamp_ns(msg.header)
@@ -274,7 +273,8 @@ def ros_cloud(msg: Any, typename: str) -> StampedCloud:
         raise ValueError(
             f"{typename} is not a point cloud; expected one of {', '.join(CLOUD_TYPES)}"
         )
-    return StampedCloud(stamp_ns=stamp, frame_id=msg.header.frame_id.lstrip("/"), points=points)
+    frame_id = msg.header.frame_id.lstrip("/")
+    return StampedCloud(stamp_ns=stamp, frame_id=frame_id, points=points, times=times)
 
 
 # --- Livox CustomMsg straight from its bytes ----------------------------------------------------
