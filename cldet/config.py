@@ -458,14 +458,6 @@ class TrackingConfig(BaseModel):
         " stray early detection (the track begun on clutter beside a sign) widens for good;"
         " false: the box",
     )
-    causal_robust_static: bool = Field(
-        default=True,
-        description="causal: a track is judged static also as the refinement judges it (90 %"
-        " of its detections within static_spread_m of their median, or scattered under 2 m and"
-        " going nowhere), not only from the box around all its detections, which one stray"
-        " detection widens for good: a swaying or flickering fixture that outlasts a lost"
-        " drone's chain does not outweigh it by its length alone; false: the box",
-    )
     line_search: bool = Field(
         default=True,
         description="track-before-detect for sparse fast movers: constant-velocity lines through"

@@ -41,8 +41,7 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    ``tracking.causal_judge_s``, from when on it is judged static or rigidly fixed: for its
    first second a still object, say a sign overhead, looks like a drone that just arrived;
    rigid also by its detections after its first second alone, ``tracking.causal_robust_still``:
-   ``_rigid``; static also as the refinement judges all its detections,
-   ``tracking.causal_robust_static``: ``_still``);
+   ``_rigid``);
    the estimate is that track's filtered state moved back from the points' time to the stamp.
    In a frame the followed track misses, the estimate follows the line of the straight run
    that ends its detections, where one does (``smoothing.causal_straight_coast``: the filter
@@ -122,7 +121,6 @@ from cldet.core.selection import (
     detection_weights,
     extend_chain,
     fixed_spread,
-    is_static,
     link_reach,
     rigid_now,
     sampling_jitter,
@@ -326,15 +324,13 @@ class _Evidence:
         """Seconds from the first detection to the last."""
         return self.last_t_s - self.first_t_s
 
-    def score(self, cfg: TrackingConfig, rigid: bool = False, still: bool = False) -> float:
+    def score(self, cfg: TrackingConfig, rigid: bool = False) -> float:
         """Running evidence; "static" and "fixed" (see ``cldet.core.selection``: here the box
         around the running means, whose edge is about twice the spread) are judged once the
         track has lived ``causal_judge_s`` (when 0: ``_JUDGE_STATIC_S``, fixed
         ``FIXED_JUDGE_S``); the fixed spread grows to the detections' mean sampling jitter
         times ``fixed_sampling_factor`` as in the refinement. ``rigid``: judged fixed from its
-        detections after its head (``selection.rigid_now``; ``tracking.causal_robust_still``).
-        ``still``: judged static from its detections as the refinement judges it
-        (``selection.is_static``; ``tracking.causal_robust_static``)."""
+        detections after its head (``selection.rigid_now``; ``tracking.causal_robust_still``)."""
         lived = self.lived
         factor = 1.0
         judge_fixed = cfg.causal_judge_s or FIXED_JUDGE_S
@@ -347,7 +343,7 @@ class _Evidence:
             )
         ):
             factor = cfg.fixed_factor
-        elif lived >= judge_static and (still or self.moved < 2.0 * cfg.static_spread_m):
+        elif lived >= judge_static and self.moved < 2.0 * cfg.static_spread_m:
             factor = cfg.static_factor
         return self.weight * factor * (1.0 + 0.5 * self.both / max(self.hits, 1))
 
@@ -432,7 +428,6 @@ class TrackEstimator:
         self._weigher = _weigher(model, config.tracking)
         self._learned: dict[int, tuple[int, float]] = {}
         self._rigid_cache: dict[int, tuple[int, bool]] = {}  # causal_robust_still: (hits, rigid)
-        self._still_cache: dict[int, tuple[int, bool]] = {}  # causal_robust_static: (hits, still)
         self._choice: int | None = None  # causal: the track followed
         # causal (``tracking.causal_keep_lost``): the chain lost, the evidence the followed
         # track carries on from a lost chain it continues, and the followed chain's evidence
@@ -541,7 +536,6 @@ class TrackEstimator:
             self._evidence = {k: v for k, v in self._evidence.items() if k in alive}
             self._learned = {k: v for k, v in self._learned.items() if k in alive}
             self._rigid_cache = {k: v for k, v in self._rigid_cache.items() if k in alive}
-            self._still_cache = {k: v for k, v in self._still_cache.items() if k in alive}
 
     def _heights(self, clusters: tuple[Cluster, ...]) -> NDArray[np.float64]:
         """(K,) each cluster's lowest point above the local ground, 0 where it may continue."""
@@ -738,7 +732,7 @@ class TrackEstimator:
             row[tid] = i
             if tid != self._choice and ev.lived < tc.causal_judge_s:
                 continue  # not chosen before it can be judged static or fixed
-            h = ev.score(tc, self._rigid(tid, ev), self._still(tid, ev))
+            h = ev.score(tc, self._rigid(tid, ev))
             if tid == self._choice:
                 base = self._base
             elif lost is not None and self._continues(tid):
@@ -850,20 +844,6 @@ class TrackEstimator:
 
         return self._per_track(self._rigid_cache, track_id, ev.hits, rigid, False)
 
-    def _still(self, track_id: int, ev: _Evidence) -> bool:
-        """Whether a track keeps to one place as the refinement judges it
-        (``selection.is_static`` over all its detections: one stray detection, which widens
-        the running box for good, does not count), once it has lived ``causal_judge_s``
-        (``tracking.causal_robust_static``); see ``_per_track``."""
-        tc = self.config.tracking
-        if not tc.causal_robust_static or ev.lived < (tc.causal_judge_s or _JUDGE_STATIC_S):
-            return False
-
-        def still(rec: TrackRecord, det: TrackDetections) -> bool:
-            return is_static(self._times[rec.frames], rec.positions, tc)
-
-        return self._per_track(self._still_cache, track_id, ev.hits, still, False)
-
     def _learned_factor(self, track_id: int, hits: int) -> float:
         """The learned re-weighing of a track's running evidence (:class:`TrackWeigher`), as in
         the refinement, from its detections so far (see ``_per_track``)."""
@@ -920,10 +900,7 @@ class TrackEstimator:
         if sc is None:  # a track that took the followed one's object over (``_hand_over``)
             ev = self._evidence[track_id]
             rigid = self._rigid(track_id, ev)
-            still = self._still(track_id, ev)
-            sc = ev.score(self.config.tracking, rigid, still) * self._learned_factor(
-                track_id, ev.hits
-            )
+            sc = ev.score(self.config.tracking, rigid) * self._learned_factor(track_id, ev.hits)
         self._value = self._base + sc
 
     def _hand_over(

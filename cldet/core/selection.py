@@ -292,22 +292,16 @@ def _hand_factor(
     speeds = rec.speed[2:] if h > 3 else rec.speed[1:]
     if len(speeds) and percentile(speeds, 90) > cfg.max_speed:
         factor *= 0.1
+    centre = column_medians(pos)
+    spread = percentile(np.linalg.norm(pos - centre, axis=1), 90)
     jitter = median(sampling_jitter(det.extent, rec.n_points))
     if _is_fixed(times_s[rec.frames], pos, fixed_spread(cfg, jitter)):
         factor *= cfg.fixed_factor
-    elif is_static(times_s[rec.frames], pos, cfg):
+    elif spread < cfg.static_spread_m or (
+        spread < _JITTER_M and _net_motion(times_s[rec.frames], pos) < cfg.static_spread_m
+    ):
         factor *= cfg.static_factor
     return factor * (1.0 + 0.5 * float(np.mean(det.both)))
-
-
-def is_static(t: NDArray[np.float64], pos: NDArray[np.float64], cfg: TrackingConfig) -> bool:
-    """Whether a track's detections ``pos`` (H,3) at times ``t`` (H,) keep to one place, as
-    the refinement judges "static": 90 % of them within ``static_spread_m`` of their median,
-    or scattered less than 2 m and going nowhere."""
-    spread = percentile(np.linalg.norm(pos - column_medians(pos), axis=1), 90)
-    return spread < cfg.static_spread_m or (
-        spread < _JITTER_M and _net_motion(t, pos) < cfg.static_spread_m
-    )
 
 
 def rigid_now(
