@@ -245,6 +245,7 @@ def annotate_log(
     # every frame's foreground and clusters, on disk until the results are written: memory
     # does not grow with the sequence's length
     detections: Spool[FrameDetections] = Spool()
+    stamps: list[int] = []  # each detection's stamp, kept in memory (8 bytes a frame)
     try:
         estimator = make_estimator(config, model)
         progress.start(n_frames, f"{sequence}: tracking")
@@ -258,6 +259,7 @@ def annotate_log(
                 in_hand = time.perf_counter()
                 found_here = estimator.register_frame(frame)
                 detections.append(found_here)
+                stamps.append(found_here.stamp_ns)
                 view.log_frame(frame, found_here)
                 if live is not None:
                     live.frame_done(frame.stamp_ns, time.perf_counter() - in_hand)
@@ -275,7 +277,9 @@ def annotate_log(
             view.log_truth(truth_ns, truth_xyz, errors, _estimates_at(result.estimates, truth_ns))
             rms_m = None if errors is None else rms(errors)
         frame_id = lidar_frame[0] if lidar_frame else topics.FRAME_MID360
-        additions = result_additions(result, detections, frame_id=frame_id, truth=truth_xyz)
+        additions = result_additions(
+            result, detections, frame_id=frame_id, truth=truth_xyz, stamps=stamps
+        )
         if tree is None:  # a log without a frame tree gets one (replaced by the next run)
             additions.append((first_ns, _tree_writer(tf_taken, frame_id, config.sensor, first_ns)))
         metadata = {

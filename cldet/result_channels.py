@@ -32,8 +32,12 @@ def result_additions(
     *,
     frame_id: str = topics.FRAME_MID360,
     truth: NDArray[np.float64] | None = None,
+    stamps: Sequence[int] | None = None,
 ) -> list[tuple[int, Addition]]:
     """The ``/cldet/*`` messages of one annotate run, as ``(log_time_ns, write)`` pairs.
+
+    ``stamps``: each of ``detections``' ``stamp_ns``, where the caller kept them (``detections``
+    may live on disk: each is then read once, when its messages are written, not also here).
 
     All in ``frame_id`` (the LiDAR's frame). Foxglove draws every one of them; Rerun's MCAP
     import draws the point clouds (``/cldet/drone``, ``/cldet/track``, ``/cldet/truth_track``,
@@ -69,10 +73,12 @@ def result_additions(
         if truth is not None and len(truth):
             truth_xyz = np.asarray(truth, dtype=np.float64)
             additions.append((first, truth_track_writer(first, truth_xyz, frame_id)))
-    for i, det in enumerate(detections):
-        # the writer reads its frame again when called: ``detections`` may live on disk
-        chosen_id = result.chosen.get(det.stamp_ns)
-        additions.append((det.stamp_ns, _frame_clusters_writer(detections, i, chosen_id, frame_id)))
+    if stamps is None:
+        stamps = [det.stamp_ns for det in detections]
+    for i, stamp_ns in enumerate(stamps):
+        # the writer reads its frame when called: ``detections`` may live on disk
+        chosen_id = result.chosen.get(stamp_ns)
+        additions.append((stamp_ns, _frame_clusters_writer(detections, i, chosen_id, frame_id)))
     return additions
 
 

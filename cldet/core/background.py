@@ -76,10 +76,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from cldet.config import BackgroundConfig
 from cldet.core.ground import GroundModel, GroundPlane
+from cldet.core.stats import box_minimum
 
 __all__ = ["CORE", "FOREGROUND", "MARGIN", "BackgroundModel", "StaticView", "direction_cells"]
 
@@ -679,14 +679,12 @@ class BackgroundModel:
         dilated = static
         if cfg.dilate_cells > 0:
             size = 2 * cfg.dilate_cells + 1
-            dilated = ndimage.minimum_filter(static, size=size, mode=("nearest", "wrap"))
+            dilated = box_minimum(static, size, wrap_columns=True)
             dilated = pool_groups(dilated, groups)
         self._static = np.ascontiguousarray(static, dtype=np.float32).ravel()
         self._dilated = np.ascontiguousarray(dilated, dtype=np.float32).ravel()
         if cfg.dilate_cells != 1:
-            dilated = pool_groups(
-                ndimage.minimum_filter(static, size=3, mode=("nearest", "wrap")), groups
-            )
+            dilated = pool_groups(box_minimum(static, 3, wrap_columns=True), groups)
         self._around = np.ascontiguousarray(dilated, dtype=np.float32).ravel()
         # the ground from the last frame's returns on static surfaces (real points: a cell's
         # centre at its nearest range sits above a ground seen at a grazing angle)

@@ -90,7 +90,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Protocol, TypeVar
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -160,6 +160,8 @@ _SWITCH_RATIO = 1.3  # causal choice: a challenger must have this much more evid
 _JUDGE_STATIC_S = 1.0  # causal, without causal_judge_s: a track is judged static after this
 _LEARNED_EVERY = 5  # causal: a track's learned factor and rigidity are redone after this many hits
 _T = TypeVar("_T")
+# the eight corners of a box: which axes take the upper bound, corner m's bit d for axis d
+_BOX_CORNERS = np.array([[(m >> d) & 1 for d in range(3)] for m in range(8)], dtype=bool)
 
 
 @dataclass(frozen=True)
@@ -171,6 +173,54 @@ class FrameDetections:
     labels: NDArray[np.int32]  # (M,) cluster id per foreground point, -1 noise
     clusters: tuple[Cluster, ...]
     estimate: Estimate | None = None  # the causal estimate (None: the method makes none)
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """Pickled with its clusters as one array: ``annotate`` spools every frame's detections
+        (``cldet.io.spool``), and a tuple of small dataclasses of arrays pickles slowly."""
+        packed = np.array(
+            [
+                (
+                    c.cluster_id,
+                    *c.centroid,
+                    *c.lower,
+                    *c.upper,
+                    c.n_points,
+                    c.n_mid360,
+                    c.n_avia,
+                    c.mid360_z_ss,
+                )
+                for c in self.clusters
+            ],
+            dtype=np.float64,
+        ).reshape(-1, 14)
+        return (
+            _unpack_detections,
+            (self.stamp_ns, self.foreground, self.labels, packed, self.estimate),
+        )
+
+
+def _unpack_detections(
+    stamp_ns: int,
+    foreground: NDArray[np.float32],
+    labels: NDArray[np.int32],
+    packed: NDArray[np.float64],
+    estimate: Estimate | None,
+) -> FrameDetections:
+    """``FrameDetections.__reduce__`` undone (every value as it was: float64 holds the counts)."""
+    clusters = tuple(
+        Cluster(
+            cluster_id=int(row[0]),
+            centroid=row[1:4],
+            lower=row[4:7],
+            upper=row[7:10],
+            n_points=int(row[10]),
+            n_mid360=int(row[11]),
+            n_avia=int(row[12]),
+            mid360_z_ss=float(row[13]),
+        )
+        for row in packed
+    )
+    return FrameDetections(stamp_ns, foreground, labels, clusters, estimate)
 
 
 @dataclass(frozen=True)
@@ -543,9 +593,7 @@ class TrackEstimator:
         hi = np.array([c.upper for c in clusters])
         centroid = np.array([c.centroid for c in clusters])
         # the box's eight corners: with a tilted sensor "lowest" is along the ground's up
-        corners = np.stack(
-            [np.where([(m >> d) & 1 for d in range(3)], hi, lo) for m in range(8)], axis=1
-        )
+        corners = np.where(_BOX_CORNERS[None, :, :], hi[:, None, :], lo[:, None, :])  # (K,8,3)
         height = self.background.ground.height_above(corners.reshape(-1, 3)).reshape(-1, 8)
         height = height.min(axis=1)
         tc = self.config.tracking

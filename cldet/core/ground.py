@@ -30,10 +30,12 @@ Before the first fit (the background's warm-up) heights are NaN: unknown, never 
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 from scipy.spatial.transform import Rotation
+
+from cldet.core.stats import box_minimum
 
 __all__ = ["GroundModel", "GroundPlane"]
 
@@ -159,7 +161,7 @@ class GroundModel:
         np.minimum.at(grid, i[inside] * self._n + j[inside], height[inside])
         grid[~self._ground_in_view()] = np.inf
         # the local ground of a cell: the lowest height within one cell of it
-        self._map = ndimage.minimum_filter(grid.reshape(self._n, self._n), size=3, mode="nearest")
+        self._map = box_minimum(grid.reshape(self._n, self._n), 3, wrap_columns=False)
 
     def _cells(
         self, p: NDArray[np.float64]
@@ -173,13 +175,11 @@ class GroundModel:
         """(n * n,) whether the plane under each map cell's centre is inside the field of view."""
         assert self.normal is not None
         centres = (np.arange(self._n) + 0.5) * _CELL_M - _HALF_EXTENT_M
-        u, v = np.meshgrid(centres, centres, indexing="ij")
         # the plane's point under (u, v): the in-plane axes, and the foot of the sensor origin
-        foot = -self.offset * self.normal
-        pts = foot + u.reshape(-1, 1) * self._axes[0] + v.reshape(-1, 1) * self._axes[1]
-        rng = np.linalg.norm(pts, axis=1)
-        sin_bottom = np.sin(np.radians(self.field_bottom_deg))
-        return np.asarray(pts[:, 2] >= sin_bottom * rng)
+        foot = np.asarray(-self.offset * self.normal, dtype=np.float64)
+        sin_bottom = float(np.sin(np.radians(self.field_bottom_deg)))
+        axes = np.ascontiguousarray(self._axes, dtype=np.float64)
+        return _in_view_kernel(centres, foot, axes, sin_bottom)
 
     def plane_height(self, points: NDArray[np.floating]) -> NDArray[np.float64]:
         """Height of each point (N,3) above the ground plane, metres (NaN before a fit)."""
@@ -200,3 +200,26 @@ class GroundModel:
         local[~np.isfinite(local)] = 0.0  # nothing static seen there: the plane
         # a point below everything static around it stands on what it is (height 0 at least)
         return h - np.minimum(local, h)
+
+
+@numba.njit(cache=True)
+def _in_view_kernel(
+    centres: NDArray[np.floating],
+    foot: NDArray[np.float64],
+    axes: NDArray[np.float64],
+    sin_bottom: float,
+) -> NDArray[np.bool_]:
+    """``GroundModel._ground_in_view``: for each map cell (u, v) = (centres[i], centres[j]), in
+    row-major order, whether the plane's point foot + u axes[0] + v axes[1] lies at or above the
+    elevation whose sine is ``sin_bottom`` (summed in numpy's order, so the same floats)."""
+    n = len(centres)
+    out = np.empty(n * n, dtype=np.bool_)
+    for i in range(n):
+        u = centres[i]
+        for j in range(n):
+            v = centres[j]
+            x = foot[0] + u * axes[0, 0] + v * axes[1, 0]
+            y = foot[1] + u * axes[0, 1] + v * axes[1, 1]
+            z = foot[2] + u * axes[0, 2] + v * axes[1, 2]
+            out[i * n + j] = z >= sin_bottom * np.sqrt(x * x + y * y + z * z)
+    return out

@@ -45,7 +45,6 @@ from typing import TypeVar
 import numba
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from cldet.config import TrackingConfig
 from cldet.core.tracking import (
@@ -80,10 +79,7 @@ class _Pool:
             ok = (table.extent <= cfg.max_size_m) & (cross >= cfg.min_cross_section_m2)
             if len(table) > 1:
                 # isolated: no other cluster of the frame within line_isolation_m
-                near = cKDTree(table.centroid).query_ball_point(
-                    table.centroid, cfg.line_isolation_m, return_length=True
-                )
-                ok &= np.asarray(near) <= 1
+                ok &= _isolated(table.centroid, cfg.line_isolation_m)
             keep = np.flatnonzero(ok)
             frames.append(np.full(len(keep), f, dtype=np.int64))
             clusters.append(keep.astype(np.int64))
@@ -127,6 +123,22 @@ class _Pool:
             idx,
         )
         return dist, idx
+
+
+@numba.njit(cache=True)
+def _isolated(centroid: NDArray[np.float64], radius: float) -> NDArray[np.bool_]:
+    """(K,) whether no other of the points ``centroid`` (K,3) lies within ``radius`` (at most,
+    compared squared, as a KD-tree's ball query counts); a frame holds a few clusters, so
+    every pair is measured."""
+    k = len(centroid)
+    r2 = radius * radius
+    out = np.ones(k, dtype=np.bool_)
+    for i in range(k):
+        for j in range(i + 1, k):
+            if _dist2(centroid, j, centroid[i, 0], centroid[i, 1], centroid[i, 2]) <= r2:
+                out[i] = False
+                out[j] = False
+    return out
 
 
 @numba.njit(cache=True, inline="always")

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "box_minimum",
     "column_medians",
     "median",
     "median_of_sorted",
@@ -82,3 +83,45 @@ def percentile(x: NDArray[np.floating], q: float) -> float:
     if np.isnan(s[-1]):
         return float("nan")
     return float(percentile_of_sorted(s, q))
+
+
+def box_minimum(a: NDArray[np.floating], size: int, wrap_columns: bool) -> NDArray[np.floating]:
+    """``scipy.ndimage.minimum_filter(a, size, mode=("nearest", "wrap" or "nearest"))`` of a 2D
+    array without NaN: the least value within ``size // 2`` rows and columns of each element,
+    rows clamped at the edges, columns wrapped around (``wrap_columns``: a full circle of
+    azimuths) or clamped; the same values (a minimum is exact) at a tenth of the cost on the
+    small images of the background and the ground map."""
+    arr = np.ascontiguousarray(a)
+    return _box_minimum(arr, int(size) // 2, bool(wrap_columns))
+
+
+@numba.njit(cache=True)
+def _box_minimum(a: NDArray[np.floating], half: int, wrap: bool) -> NDArray[np.floating]:
+    """``box_minimum``: separable, along the columns first, then the rows."""
+    n_r, n_c = a.shape
+    rows = np.empty_like(a)
+    for i in range(n_r):
+        for j in range(n_c):
+            m = a[i, j]
+            for d in range(-half, half + 1):
+                k = j + d
+                if k < 0 or k >= n_c:
+                    if wrap:
+                        k %= n_c
+                    else:
+                        k = min(max(k, 0), n_c - 1)
+                if a[i, k] < m:
+                    m = a[i, k]
+            rows[i, j] = m
+    out = np.empty_like(a)
+    for i in range(n_r):
+        for j in range(n_c):
+            m = rows[i, j]
+            for d in range(-half, half + 1):
+                k = i + d
+                if k < 0 or k >= n_r:
+                    k = min(max(k, 0), n_r - 1)
+                if rows[k, j] < m:
+                    m = rows[k, j]
+            out[i, j] = m
+    return out

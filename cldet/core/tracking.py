@@ -368,11 +368,18 @@ class CandidateTracker:
                             float(table.extent[j]),
                             float(lag[j]),
                         )
-                        self._judge_raw(int(self._ids[i]))
+                        if cfg.raw_gate_m > 0:  # (the raw gate off: nothing reads the verdict)
+                            self._judge_raw(int(self._ids[i]))
                     assigned[cols] = True
                     updated[rows] = True
                     owner[cols] = self._ids[rows]
-        if raw_points is not None and len(raw_points) and n_tr and not updated.all():
+        if (
+            cfg.raw_gate_m > 0
+            and raw_points is not None
+            and len(raw_points)
+            and n_tr
+            and not updated.all()
+        ):
             self._raw_continue(frame_index, t_s, np.flatnonzero(~updated), raw_points, z[assigned])
         new = np.flatnonzero(~assigned)
         if len(new):
