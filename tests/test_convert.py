@@ -240,6 +240,7 @@ def test_convert_sequence_into_memory(tiny: Path) -> None:
     check_log(log, seq.path, images=False)
 
 
+@pytest.mark.slow
 def test_real_sample_round_trips(real_sample: Path, tmp_path: Path) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the sample's reference/ folder is not a split
