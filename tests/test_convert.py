@@ -108,8 +108,8 @@ def expected_points(path: Path) -> np.ndarray:
 def expected_times(path: Path) -> np.ndarray:
     """Each kept row's firing time, the obvious way: row i of N fired at i / N of 100 ms."""
     a = np.load(path)
-    rows = [i for i in range(len(a)) if np.any(a[i] != 0)]
-    return np.array([i * (0.1 / len(a)) for i in rows], dtype=np.float32)
+    rows = np.flatnonzero(np.any(a != 0, axis=1))  # (a row at a time took 2 min on the real sample)
+    return (rows * (0.1 / len(a))).astype(np.float32)
 
 
 def raw_messages(log: Path, topic: str) -> list:
@@ -240,7 +240,6 @@ def test_convert_sequence_into_memory(tiny: Path) -> None:
     check_log(log, seq.path, images=False)
 
 
-@pytest.mark.slow
 def test_real_sample_round_trips(real_sample: Path, tmp_path: Path) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the sample's reference/ folder is not a split

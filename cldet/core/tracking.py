@@ -195,8 +195,9 @@ def constant_velocity_fit(
     tm = float(t.mean())
     tc = t - tm
     den = float(tc @ tc)
-    v = (tc @ (p - p.mean(axis=0))) / den if den > 0 else np.zeros(3)
-    return p.mean(axis=0), v, tm
+    mean = p.mean(axis=0)
+    v = (tc @ (p - mean)) / den if den > 0 else np.zeros(3)
+    return mean, v, tm
 
 
 @dataclass(frozen=True)
