@@ -94,7 +94,6 @@ from typing import Any, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from cldet.config import CldetConfig, SmoothingConfig, TrackingConfig
 from cldet.core.background import FOREGROUND, MARGIN, BackgroundModel, StaticView
@@ -739,11 +738,11 @@ class TrackEstimator:
         margin = np.flatnonzero(labels == MARGIN)
         if len(margin) == 0:
             return
-        places = np.array([z for z, _ in self._zones.values()])
-        dist, _ = cKDTree(places).query(
-            pts[margin], distance_upper_bound=self.config.background.reclaim_m
-        )
-        labels[margin[np.isfinite(dist)]] = FOREGROUND
+        places = np.array([z for z, _ in self._zones.values()], dtype=np.float64)  # a few
+        d = pts[margin].astype(np.float64)[:, None, :] - places[None, :, :]
+        d2 = np.einsum("mzk,mzk->mz", d, d).min(axis=1)
+        # nearer than reclaim_m (strictly, compared squared: as a KD-tree's bounded query)
+        labels[margin[d2 < self.config.background.reclaim_m ** 2]] = FOREGROUND
 
     def _zone_of(self, table: ClusterTable) -> NDArray[np.int64]:
         """(K,) the protected place each small cluster lies in (within ``max_gate_m``), or -1."""
