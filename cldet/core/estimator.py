@@ -742,7 +742,7 @@ class TrackEstimator:
         d = pts[margin].astype(np.float64)[:, None, :] - places[None, :, :]
         d2 = np.einsum("mzk,mzk->mz", d, d).min(axis=1)
         # nearer than reclaim_m (strictly, compared squared: as a KD-tree's bounded query)
-        labels[margin[d2 < self.config.background.reclaim_m ** 2]] = FOREGROUND
+        labels[margin[d2 < self.config.background.reclaim_m**2]] = FOREGROUND
 
     def _zone_of(self, table: ClusterTable) -> NDArray[np.int64]:
         """(K,) the protected place each small cluster lies in (within ``max_gate_m``), or -1."""
