@@ -40,6 +40,7 @@ within the tolerance by construction).
 
 from __future__ import annotations
 
+import math
 from typing import TypeVar
 
 import numba
@@ -390,8 +391,9 @@ def _grow(
                 p0, v, tm = whole
             else:
                 p0, v, tm = constant_velocity_fit(pool.t[idx[end]], pool.pos[idx[end]])
-            pred[on] = p0 + np.outer(tf[on] - tm, v)
-            tol[on] = _tolerance(float(np.linalg.norm(v)), cfg, half_scan_s)
+            # (np.outer and np.linalg.norm of a 3-vector, without their call overhead)
+            pred[on] = p0 + (tf[on] - tm)[:, None] * v[None, :]
+            tol[on] = _tolerance(math.sqrt(float(v @ v)), cfg, half_scan_s)
         d, j = pool.nearest(todo, pred, float(tol.max()))
         hit = d <= tol
         if not hit.any():
