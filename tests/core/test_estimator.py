@@ -8,7 +8,7 @@ default (zero) bias correction, so they include the LiDAR's near-face bias (~0.2
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -316,6 +316,9 @@ def test_cldet_without_environment_clusters_every_valid_point(sim_root: Path) ->
     assert len(result.estimates) == len(frames)
 
 
+POST = ((5.8, -4.2, -1.5), (6.2, -3.8, 1.0))  # a post in the scene of ``_scene_frames``
+
+
 def _scene_frames(
     path: list[np.ndarray], seed: int, n_rays: int = 6000, fringe_from: int | None = None
 ) -> list[LidarFrame]:
@@ -325,11 +328,10 @@ def _scene_frames(
     from tests.core.scene import scan
 
     rng = np.random.default_rng(seed)
-    post = ((5.8, -4.2, -1.5), (6.2, -3.8, 1.0))
     empty = np.zeros((0, 3), np.float32)
     frames = []
     for k, p in enumerate(path):
-        pts = scan(rng, [((*p,), 0.3)], n_rays=n_rays, boxes=[post])
+        pts = scan(rng, [((*p,), 0.3)], n_rays=n_rays, boxes=[POST])
         if fringe_from is not None and k >= fringe_from:
             u = rng.normal(size=(3, 3))
             u *= rng.uniform(0.9, 1.0, (3, 1)) / np.linalg.norm(u, axis=1, keepdims=True)
@@ -486,14 +488,26 @@ def test_a_frame_flooded_with_speckle_gives_at_most_max_clusters() -> None:
     assert len(result.estimates) == 4
 
 
-def _with_objects(seed: int, n: int, objects: object) -> list[LidarFrame]:
-    """Scans of the test scene with, per frame k, the spheres ``objects(k)`` and no wall."""
+def _with_objects(
+    seed: int,
+    n: int,
+    objects: object,
+    wall: bool = False,
+    n_rays: int = 20000,
+    boxes: Sequence[tuple[Sequence[float], Sequence[float]]] = (),
+) -> list[LidarFrame]:
+    """Scans of the test scene with, per frame k, the spheres ``objects(k)``; no wall unless
+    ``wall``, and the extra ``boxes`` (``tests.core.scene.scan``)."""
     from tests.core.scene import scan
 
     rng = np.random.default_rng(seed)
     empty = np.zeros((0, 3), np.float32)
     return [
-        LidarFrame(k * 100_000_000, scan(rng, objects(k), n_rays=20000, wall=False), empty)  # type: ignore[operator]
+        LidarFrame(
+            k * 100_000_000,
+            scan(rng, objects(k), n_rays=n_rays, wall=wall, boxes=boxes),  # type: ignore[operator]
+            empty,
+        )
         for k in range(n)
     ]
 

@@ -17,7 +17,7 @@ from cldet.config import load_config
 from cldet.core.methods import estimate_sequence
 from cldet.types import LidarFrame, Source
 from tests.core.scene import scan
-from tests.core.test_estimator import _hover_path, _rms, _scene_frames, _with_objects
+from tests.core.test_estimator import POST, _hover_path, _rms, _scene_frames, _with_objects
 from tests.core.test_lines import _far_speckle
 
 
@@ -220,18 +220,6 @@ def test_max_speed_keeps_the_causal_estimate_off_chance_lines_through_far_return
     assert sum(far_off) >= 2, far_off  # 3 of 4 seeds: hundreds of metres off
 
 
-def _wall_frames(seed: int, path: NDArray[np.float64]) -> list[LidarFrame]:
-    """Scans of the test scene with its wall (``tests.core.scene.WALL``: 12-13 m out, 12 m long,
-    5.5 m high) and a 0.25 m drone at ``path`` (n,3), one scan every 100 ms: the drone is hidden
-    wherever the wall stands between it and the sensor."""
-    rng = np.random.default_rng(seed)
-    empty = np.zeros((0, 3), np.float32)
-    return [
-        LidarFrame(k * 100_000_000, scan(rng, [(tuple(p), 0.25)], n_rays=20000), empty)
-        for k, p in enumerate(path)
-    ]
-
-
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_a_slow_straight_run_is_not_held_as_a_transit_beyond_the_detections(seed: int) -> None:
     # smoothing.straight_min_speed_mps: a drone 15 m out, 3.5 m above the ground, creeps along
@@ -244,7 +232,9 @@ def test_a_slow_straight_run_is_not_held_as_a_transit_beyond_the_detections(seed
     # seen, so the negative evidence (smoothing.unseen_check_s) lets the motion go on
     n, stop_y = 80, -7.0
     path = np.array([[15.0, min(stop_y - 4.0 + 0.1 * k, stop_y), 2.0] for k in range(n)])
-    frames = _wall_frames(seed, path)
+    # scans of the test scene with its wall (tests.core.scene.WALL: 12-13 m out, 12 m long,
+    # 5.5 m high) and a 0.25 m drone: hidden wherever the wall stands between it and the sensor
+    frames = _with_objects(seed, n, lambda k: [(tuple(path[k]), 0.25)], wall=True)
     hidden = [
         not np.any(np.linalg.norm(f.mid360 - path[k], axis=1) < 0.4) for k, f in enumerate(frames)
     ]
@@ -349,12 +339,7 @@ def test_a_sparsely_scanned_empty_scene_gives_no_drone_with_the_static_range_gro
     # them and next to nothing is foreground; not grown, dozens of returns a scan are, and the
     # causal estimate reports a drone on the wall's face where there is none. (In the denser
     # scans of 20000 returns the holes nearly close: 2-3 foreground returns a scan, no drone.)
-    rng = np.random.default_rng(seed)
-    post = ((5.8, -4.2, -1.5), (6.2, -3.8, 1.0))
-    empty = np.zeros((0, 3), np.float32)
-    frames = [
-        LidarFrame(k * 100_000_000, scan(rng, n_rays=6000, boxes=[post]), empty) for k in range(60)
-    ]
+    frames = _with_objects(seed, 60, lambda k: [], wall=True, n_rays=6000, boxes=[POST])
 
     def run(dilate: int) -> tuple[float, list[NDArray[np.float64]]]:
         """The mean foreground points a scan after the first second, and the causal estimate
