@@ -276,6 +276,65 @@ def check_order(last_ns: int | None, stamp_ns: int) -> None:
 
 
 @dataclass(frozen=True)
+class _HeadFrame:
+    """One frame of the head ``_replay`` judges again: its fused points, the Mid-360's count,
+    the points' times, and the foreground's indices and cluster labels as first found."""
+
+    points: NDArray[np.float32]
+    n_mid: int
+    p_times: NDArray[np.float32]
+    fg_idx: NDArray[np.intp]
+    labels: NDArray[np.int32]
+
+
+def _extended(table: ClusterTable, wider: ClusterTable) -> ClusterTable:
+    """``wider`` (a frame's clusters and more after them), its first clusters' values those of
+    ``table`` (the frame's clusters as first found, left as they were judged)."""
+    k = len(table)
+    out = {}
+    for name in ("height", "crowd", "screened", "mid360_z_ss", "dt", "size"):
+        old, new = getattr(table, name), getattr(wider, name)
+        if old is None or new is None:
+            out[name] = new
+            continue
+        new = new.copy()
+        new[:k] = old
+        out[name] = new
+    return replace(wider, **out)
+
+
+def _cut(rec: TrackRecord, j: int) -> TrackRecord:
+    """A track's first ``j`` detections."""
+    return replace(
+        rec,
+        frames=rec.frames[:j],
+        clusters=rec.clusters[:j],
+        positions=rec.positions[:j],
+        n_points=rec.n_points[:j],
+        nis=rec.nis[:j],
+        speed=rec.speed[:j],
+        dt=None if rec.dt is None else rec.dt[:j],
+    )
+
+
+def _joined(head: TrackRecord, rec: TrackRecord) -> TrackRecord:
+    """``rec`` with the detections of ``head`` (all before its first) before its own."""
+    dt = None
+    if head.dt is not None or rec.dt is not None:
+        dt = np.concatenate([head.lags(), rec.lags()])
+    return replace(
+        rec,
+        frames=np.concatenate([head.frames, rec.frames]),
+        clusters=np.concatenate([head.clusters, rec.clusters]),
+        positions=np.concatenate([head.positions, rec.positions]),
+        n_points=np.concatenate([head.n_points, rec.n_points]),
+        nis=np.concatenate([head.nis, rec.nis]),
+        speed=np.concatenate([head.speed, rec.speed]),
+        dt=dt,
+    )
+
+
+@dataclass(frozen=True)
 class _Coast:
     """Where the causal estimate coasts from once the followed track is lost."""
 
@@ -494,6 +553,13 @@ class TrackEstimator:
         # where protected movers were last seen: (position (3,), time s); a cluster there is
         # protected too (a hovering drone's track may end and restart without moving again)
         self._zones: dict[int, tuple[NDArray[np.float64], float]] = {}  # by track id
+        # the first ``background.replay_s`` of frames, kept to be judged again once (``_replay``),
+        # and what that gave the refinement: wider cluster tables of those frames, and by
+        # track id the detections found before a track's first
+        self._head: list[_HeadFrame] | None = [] if config.background.replay_s > 0 else None
+        self._replayed_tables: dict[int, ClusterTable] = {}
+        self._prefixes: dict[int, TrackRecord] = {}
+        self._replayed: list[TrackRecord] = []  # tracks the head alone shows
         self._offset_s = config.frames.scan_offset_s
         fc = config.tracking
         self._fov_tan = np.tan(np.radians(fc.fov_bottom_deg))
@@ -507,50 +573,21 @@ class TrackEstimator:
         pts, n_mid, p_times = fuse_timed(frame, cfg)
         bg = self.background
         bg.advance(frame.stamp_ns)
+        t0_ns = self._stamps[0] if self._stamps else frame.stamp_ns
+        since_s = (frame.stamp_ns - t0_ns) / NS_PER_S
+        t_s = since_s + self._offset_s
+        if self._head is not None and since_s >= cfg.background.replay_s:
+            self._replay()
         cells, ranges = bg.directions(pts)  # for classify and update alike
         labels_bg = bg.classify(pts, (cells, ranges))
         if self._zones:
             self._reclaim(pts, labels_bg)
-        fg_idx = np.flatnonzero(labels_bg == FOREGROUND)
-        if len(fg_idx) > cfg.clustering.max_points:  # keep the nearest
-            r2 = np.einsum("ij,ij->i", pts[fg_idx], pts[fg_idx])
-            fg_idx = np.sort(fg_idx[np.argsort(r2, kind="stable")[: cfg.clustering.max_points]])
-        fg = pts[fg_idx]
-        n_mid_fg = int(np.searchsorted(fg_idx, n_mid))
-        labels = cluster_points(fg, cfg.clustering.eps_m, cfg.clustering.min_samples)
+        fg_idx = self._nearest(np.flatnonzero(labels_bg == FOREGROUND), pts)
+        labels = cluster_points(pts[fg_idx], cfg.clustering.eps_m, cfg.clustering.min_samples)
         labels[labels >= cfg.clustering.max_clusters] = -1  # ids rank by size: the smallest go
-        t0_ns = self._stamps[0] if self._stamps else frame.stamp_ns
-        t_s = (frame.stamp_ns - t0_ns) / NS_PER_S + self._offset_s
-        clusters = summarize_clusters(fg, labels, n_mid_fg)
-        table = ClusterTable.from_clusters(clusters)
-        if cfg.tracking.carve_gate_m > 0 and np.any(table.extent > cfg.tracking.max_size_m):
-            # the drone-sized tracks that have flown carve their objects out of wider clusters
-            ids, at = self._tracker.small_predictions(t_s)
-            flown = np.array([self._has_flown(int(i)) for i in ids], dtype=bool)
-            carved = carve_tracked(
-                fg,
-                labels,
-                table.extent,
-                at[flown],
-                cfg.tracking.carve_gate_m,
-                cfg.tracking.max_size_m,
-            )
-            if carved is not labels:
-                labels = carved
-                clusters = summarize_clusters(fg, labels, n_mid_fg)
-                table = ClusterTable.from_clusters(clusters)
-        if len(clusters):
-            crowd = crowding(table.centroid, table.n_points, cfg.tracking.crowd_radius_m)
-            screened = bg.view().screened(table.centroid)
-            # the clusters' lags (None: all seen at the frame's time, the points undated)
-            dt = (
-                _cluster_lags(labels, p_times[fg_idx], len(clusters), self._offset_s)
-                if cfg.frames.point_times
-                else None
-            )
-            table = replace(
-                table, height=self._heights(clusters), crowd=crowd, screened=screened, dt=dt
-            )
+        fg, labels, clusters, table = self._frame_table(pts, n_mid, p_times, fg_idx, labels, t_s)
+        if self._head is not None:
+            self._head.append(_HeadFrame(pts, n_mid, p_times, fg_idx, labels))
         self._stamps.append(frame.stamp_ns)
         self._tables.append(table)
         if index == len(self._times):
@@ -572,6 +609,142 @@ class TrackEstimator:
             clusters=clusters,
             estimate=estimate,
         )
+
+    def _nearest(self, fg_idx: NDArray[np.intp], pts: NDArray[np.float32]) -> NDArray[np.intp]:
+        """The foreground points' indices; the nearest ``clustering.max_points`` where more."""
+        n = self.config.clustering.max_points
+        if len(fg_idx) <= n:
+            return fg_idx
+        r2 = np.einsum("ij,ij->i", pts[fg_idx], pts[fg_idx])
+        return np.sort(fg_idx[np.argsort(r2, kind="stable")[:n]])
+
+    def _frame_table(
+        self,
+        pts: NDArray[np.float32],
+        n_mid: int,
+        p_times: NDArray[np.float32],
+        fg_idx: NDArray[np.intp],
+        labels: NDArray[np.int32],
+        t_s: float,
+        carve: bool = True,
+    ) -> tuple[NDArray[np.float32], NDArray[np.int32], tuple[Cluster, ...], ClusterTable]:
+        """A frame's foreground points (``pts[fg_idx]``, labelled ``labels``), their labels once
+        wide clusters are carved where tracks predict their objects (with ``carve``), the
+        clusters, and the cluster table with heights, crowding, screening and lags."""
+        cfg = self.config
+        fg = pts[fg_idx]
+        n_mid_fg = int(np.searchsorted(fg_idx, n_mid))
+        clusters = summarize_clusters(fg, labels, n_mid_fg)
+        table = ClusterTable.from_clusters(clusters)
+        tc = cfg.tracking
+        if carve and tc.carve_gate_m > 0 and np.any(table.extent > tc.max_size_m):
+            # the drone-sized tracks that have flown carve their objects out of wider clusters
+            ids, at = self._tracker.small_predictions(t_s)
+            flown = np.array([self._has_flown(int(i)) for i in ids], dtype=bool)
+            carved = carve_tracked(
+                fg, labels, table.extent, at[flown], tc.carve_gate_m, tc.max_size_m
+            )
+            if carved is not labels:
+                labels = carved
+                clusters = summarize_clusters(fg, labels, n_mid_fg)
+                table = ClusterTable.from_clusters(clusters)
+        if len(clusters):
+            crowd = crowding(table.centroid, table.n_points, tc.crowd_radius_m)
+            screened = self.background.view().screened(table.centroid)
+            # the clusters' lags (None: all seen at the frame's time, the points undated)
+            dt = (
+                _cluster_lags(labels, p_times[fg_idx], len(clusters), self._offset_s)
+                if cfg.frames.point_times
+                else None
+            )
+            table = replace(
+                table, height=self._heights(clusters), crowd=crowd, screened=screened, dt=dt
+            )
+        return fg, labels, clusters, table
+
+    def _replay(self) -> None:
+        """The first ``background.replay_s`` judged again against the background learned since,
+        for the refinement: more clusters in those frames, and tracks over them (once; then
+        the frames go).
+
+        While the window holds only a few bins, a cell's static range is the nearest range of
+        any one of them (``static_fraction``): a drone there from the start is learned where
+        it was a bin before. Receding along its line of sight, or crossing empty sky, where
+        nothing behind it shows the spot see-through, it can stay background for seconds, and
+        the refinement would carry its first later detection back over the frames it missed.
+        By ``replay_s`` the cells it has left are empty again. A return is added where it is
+        foreground now, was not then, and its cell has returned nothing at or in front of its
+        range in the last ``seen_through_bins`` bins (whatever was there has gone: a far
+        surface hit only now and then, not yet learned, stays out while it keeps returning).
+        The added returns form clusters of their own, after the frame's (whose ids and values
+        stay: the tracks and the causal estimates made are untouched). A fresh tracker runs
+        over the head's frames with them. Where one of its tracks took added clusters and then
+        the first cluster of a track of the estimator's, its detections before that go before
+        that track's in the refinement; one that took added clusters and none of the
+        estimator's tracks' is a candidate of its own.
+        """
+        head, self._head = self._head, None
+        if not head:
+            return
+        cfg = self.config
+        n_back = max(cfg.background.seen_through_bins, 1)
+        tracker = CandidateTracker(cfg.tracking)
+        added: list[int] = []
+        for index, h in enumerate(head):
+            t_s = float(self._times[index])
+            table = self._tables[index]
+            k = len(table)
+            now = np.flatnonzero(self.background.classify(h.points) == FOREGROUND)
+            new = np.setdiff1d(now, h.fg_idx, assume_unique=True)
+            new = new[self.background.vacated(h.points[new], n_back)]
+            extra = cluster_points(h.points[new], cfg.clustering.eps_m, cfg.clustering.min_samples)
+            extra[extra >= max(cfg.clustering.max_clusters - k, 0)] = -1
+            if np.any(extra >= 0):
+                extra[extra >= 0] += k
+                union = np.concatenate([h.fg_idx, new])
+                order = np.argsort(union, kind="stable")
+                fg_idx = union[order]
+                labels = np.concatenate([h.labels, extra])[order]
+                _, _, _, wider = self._frame_table(
+                    h.points, h.n_mid, h.p_times, fg_idx, labels, t_s, carve=False
+                )
+                table = _extended(table, wider)
+                self._replayed_tables[index] = table
+            tracker.step(index, t_s, table, h.points)
+            added.append(k)
+        # a track found there that runs into the first detection of one of the tracker's is
+        # that object found earlier (a drone learned where it just was, then found again):
+        # its detections before that one go before the tracker's track. One that shares no
+        # detection with the tracker's is a candidate of its own; one that merely crosses
+        # them would only duplicate a track already weighed
+        n = len(head)
+        starts: dict[tuple[int, int], int] = {}
+        known: set[tuple[int, int]] = set()  # the tracker's detections in those frames
+        for r in self._tracker.records():
+            if r.frames[0] >= n:
+                continue
+            if r.clusters[0] >= 0:
+                starts[(int(r.frames[0]), int(r.clusters[0]))] = r.track_id
+            inside = r.frames < n
+            known.update(zip(r.frames[inside].tolist(), r.clusters[inside].tolist(), strict=True))
+        took = np.asarray(added)
+        first_id = 1 << 40  # after every id the tracker and the line search give
+        for r in tracker.records():
+            hindsight = r.clusters >= took[r.frames]  # the clusters the replay added
+            pairs = list(zip(r.frames.tolist(), r.clusters.tolist(), strict=True))
+            if np.any(hindsight) and not known.intersection(pairs):
+                self._replayed.append(replace(r, track_id=first_id + r.track_id))
+                continue
+            for j in range(1, len(r.frames)):
+                tid = starts.get((int(r.frames[j]), int(r.clusters[j])))
+                if tid is None:
+                    continue
+                if np.any(hindsight[:j]) and (
+                    tid not in self._prefixes or self._prefixes[tid].frames[0] > r.frames[0]
+                ):
+                    self._prefixes[tid] = _cut(r, j)
+                break
+        self._candidates = None
 
     def _forget_ended(self) -> None:
         """Drop the causal evidence of tracks the tracker has ended (their ids never return).
@@ -1094,18 +1267,26 @@ class TrackEstimator:
     def candidates(self) -> Candidates:
         """Every candidate track after the last frame: the tracker's and the line search's, a
         fixed head or tail cut off where another track shows the fixed object (``split_rigid``)."""
+        if self._head:  # shorter than ``background.replay_s``: judged again at the end
+            self._replay()
         n = len(self._stamps)
         if self._candidates is None or len(self._candidates.tables) != n:
             t_s = self._times[:n].copy()  # observation times (stamp + scan offset)
-            records = self._tracker.records()
+            tables = list(self._tables)
+            for i, table in self._replayed_tables.items():
+                tables[i] = table
+            records = [
+                _joined(self._prefixes[r.track_id], r) if r.track_id in self._prefixes else r
+                for r in self._tracker.records()
+            ] + self._replayed
             if n:
                 records += find_lines(
                     self._tables, t_s, self.config.tracking, self._tracker.next_id, self._offset_s
                 )
-            records = split_rigid(records, self._tables, t_s, self.config.tracking)
+            records = split_rigid(records, tables, t_s, self.config.tracking)
             stamps = np.asarray(self._stamps, dtype=np.int64)
             self._candidates = Candidates(
-                records, list(self._tables), t_s, stamps, self.background.view(onset=True)
+                records, tables, t_s, stamps, self.background.view(onset=True)
             )
         return self._candidates
 
@@ -1116,7 +1297,12 @@ class TrackEstimator:
         if not self._stamps:
             return SequenceEstimate((), {}, (), causal)
         model = model if model is not None else self.model
-        return replace(refine_candidates(self.candidates(), self.config, model), causal=causal)
+        result = refine_candidates(self.candidates(), self.config, model)
+        # a cluster the replay added was never reported (``register_frame`` had returned the
+        # frame): the estimate there is DETECTED, but no reported cluster is the drone
+        reported = {self._stamps[i]: len(self._tables[i]) for i in self._replayed_tables}
+        chosen = {s: c for s, c in result.chosen.items() if c < reported.get(s, c + 1)}
+        return replace(result, chosen=chosen, causal=causal)
 
 
 def refine_candidates(
