@@ -674,14 +674,18 @@ class TrackEstimator:
         the refinement would carry its first later detection back over the frames it missed.
         By ``replay_s`` the cells it has left are empty again. A return is added where it is
         foreground now, was not then, and its cell has returned nothing at or in front of its
-        range in the last ``seen_through_bins`` bins (whatever was there has gone: a far
-        surface hit only now and then, not yet learned, stays out while it keeps returning).
+        range in the last ``seen_through_bins`` bins, at least one (whatever was there has
+        gone: a far surface hit only now and then, not yet learned, stays out while it keeps
+        returning); at most ``clustering.max_points`` foreground returns a frame in all, the
+        nearest.
         The added returns form clusters of their own, after the frame's (whose ids and values
         stay: the tracks and the causal estimates made are untouched). A fresh tracker runs
         over the head's frames with them. Where one of its tracks took added clusters and then
         the first cluster of a track of the estimator's, its detections before that go before
         that track's in the refinement; one that took added clusters and none of the
-        estimator's tracks' is a candidate of its own.
+        estimator's tracks' is a candidate of its own. The estimator's tracks are those of two
+        detections or more when the replay runs (``candidates`` before ``replay_s`` runs it
+        then, over the frames so far).
         """
         head, self._head = self._head, None
         if not head:
@@ -697,6 +701,10 @@ class TrackEstimator:
             now = np.flatnonzero(self.background.classify(h.points) == FOREGROUND)
             new = np.setdiff1d(now, h.fg_idx, assume_unique=True)
             new = new[self.background.vacated(h.points[new], n_back)]
+            room = cfg.clustering.max_points - len(h.fg_idx)
+            if len(new) > room:  # the nearest (none where the frame's own was capped)
+                r2 = np.einsum("ij,ij->i", h.points[new], h.points[new])
+                new = np.sort(new[np.argsort(r2, kind="stable")[: max(room, 0)]])
             extra = cluster_points(h.points[new], cfg.clustering.eps_m, cfg.clustering.min_samples)
             extra[extra >= max(cfg.clustering.max_clusters - k, 0)] = -1
             if np.any(extra >= 0):
@@ -725,25 +733,26 @@ class TrackEstimator:
                 continue
             if r.clusters[0] >= 0:
                 starts[(int(r.frames[0]), int(r.clusters[0]))] = r.track_id
-            inside = r.frames < n
+            inside = (r.frames < n) & (r.clusters >= 0)  # (raw-gate detections are no cluster)
             known.update(zip(r.frames[inside].tolist(), r.clusters[inside].tolist(), strict=True))
         took = np.asarray(added)
         first_id = 1 << 40  # after every id the tracker and the line search give
         for r in tracker.records():
             hindsight = r.clusters >= took[r.frames]  # the clusters the replay added
             pairs = list(zip(r.frames.tolist(), r.clusters.tolist(), strict=True))
-            if np.any(hindsight) and not known.intersection(pairs):
-                self._replayed.append(replace(r, track_id=first_id + r.track_id))
+            shared = [j for j, pair in enumerate(pairs) if pair in known]
+            if not shared:
+                if np.any(hindsight):
+                    self._replayed.append(replace(r, track_id=first_id + r.track_id))
                 continue
-            for j in range(1, len(r.frames)):
-                tid = starts.get((int(r.frames[j]), int(r.clusters[j])))
-                if tid is None:
-                    continue
-                if np.any(hindsight[:j]) and (
-                    tid not in self._prefixes or self._prefixes[tid].frames[0] > r.frames[0]
-                ):
-                    self._prefixes[tid] = _cut(r, j)
-                break
+            j = shared[0]  # its first detection one of the tracker's took: that track's first?
+            tid = starts.get(pairs[j])
+            if (
+                tid is not None
+                and np.any(hindsight[:j])
+                and (tid not in self._prefixes or self._prefixes[tid].frames[0] > r.frames[0])
+            ):
+                self._prefixes[tid] = _cut(r, j)
         self._candidates = None
 
     def _forget_ended(self) -> None:
