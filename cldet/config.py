@@ -154,11 +154,11 @@ class BackgroundConfig(BaseModel):
         default=3.0,
         ge=0,
         description="the first this many seconds are judged again, once, against the background"
-        " learned by then, and the tracks rebuilt over them: while the window holds a few bins,"
-        " one bin's return is static, and a drone there from the start is learned where it just"
-        " was (receding, or in empty sky that nothing shows see-through) for seconds. What is"
-        " foreground then is added, nothing taken away; the causal estimates made stay. Costs"
-        " those seconds' points in memory (0: off)",
+        " learned by then, for the refinement: while the window holds a few bins, one bin's"
+        " return is static, and a drone there from the start is learned where it just was"
+        " (receding, or in empty sky that nothing shows see-through) for seconds. What is"
+        " foreground then is added as clusters and tracks, nothing taken away; the causal"
+        " estimates stay. Costs those seconds' points in memory (0: off)",
     )
     polar_cell_width: float = Field(
         default=0.25,

@@ -11,7 +11,10 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
 1. both LiDARs fused in the Mid-360 frame (the Avia fires ~14 ms later: < 0.3 m at 20 m/s,
    well inside the clustering radius); self-returns and far returns dropped (``frames``);
 2. the static background, learned online over a sliding window, removed
-   (``cldet.core.background``; the first ``background.bin_s`` is its warm-up);
+   (``cldet.core.background``; the first ``background.bin_s`` is its warm-up); once
+   ``background.replay_s`` has passed, the frames before it are judged again against the
+   background learned by then, for the refinement: more clusters there, and tracks over them
+   (``_replay``: the only raw points ever kept are those frames'; the causal estimates stay);
 3. the foreground clustered exactly (``cldet.core.clustering``: DBSCAN eps 1 m, min 1 point, as
    a far drone gives 1-3 points); each cluster's height above the local ground comes from the
    fitted ground (``cldet.core.ground``), set to 0 when the cluster may continue below what is
@@ -303,37 +306,6 @@ def _extended(table: ClusterTable, wider: ClusterTable) -> ClusterTable:
     return replace(wider, **out)
 
 
-def _cut(rec: TrackRecord, j: int) -> TrackRecord:
-    """A track's first ``j`` detections."""
-    return replace(
-        rec,
-        frames=rec.frames[:j],
-        clusters=rec.clusters[:j],
-        positions=rec.positions[:j],
-        n_points=rec.n_points[:j],
-        nis=rec.nis[:j],
-        speed=rec.speed[:j],
-        dt=None if rec.dt is None else rec.dt[:j],
-    )
-
-
-def _joined(head: TrackRecord, rec: TrackRecord) -> TrackRecord:
-    """``rec`` with the detections of ``head`` (all before its first) before its own."""
-    dt = None
-    if head.dt is not None or rec.dt is not None:
-        dt = np.concatenate([head.lags(), rec.lags()])
-    return replace(
-        rec,
-        frames=np.concatenate([head.frames, rec.frames]),
-        clusters=np.concatenate([head.clusters, rec.clusters]),
-        positions=np.concatenate([head.positions, rec.positions]),
-        n_points=np.concatenate([head.n_points, rec.n_points]),
-        nis=np.concatenate([head.nis, rec.nis]),
-        speed=np.concatenate([head.speed, rec.speed]),
-        dt=dt,
-    )
-
-
 @dataclass(frozen=True)
 class _Coast:
     """Where the causal estimate coasts from once the followed track is lost."""
@@ -610,9 +582,12 @@ class TrackEstimator:
             estimate=estimate,
         )
 
-    def _nearest(self, fg_idx: NDArray[np.intp], pts: NDArray[np.float32]) -> NDArray[np.intp]:
-        """The foreground points' indices; the nearest ``clustering.max_points`` where more."""
-        n = self.config.clustering.max_points
+    def _nearest(
+        self, fg_idx: NDArray[np.intp], pts: NDArray[np.float32], n: int | None = None
+    ) -> NDArray[np.intp]:
+        """The foreground points' indices; the nearest ``n`` (``clustering.max_points``) where
+        more."""
+        n = self.config.clustering.max_points if n is None else max(n, 0)
         if len(fg_idx) <= n:
             return fg_idx
         r2 = np.einsum("ij,ij->i", pts[fg_idx], pts[fg_idx])
@@ -701,10 +676,8 @@ class TrackEstimator:
             now = np.flatnonzero(self.background.classify(h.points) == FOREGROUND)
             new = np.setdiff1d(now, h.fg_idx, assume_unique=True)
             new = new[self.background.vacated(h.points[new], n_back)]
-            room = cfg.clustering.max_points - len(h.fg_idx)
-            if len(new) > room:  # the nearest (none where the frame's own was capped)
-                r2 = np.einsum("ij,ij->i", h.points[new], h.points[new])
-                new = np.sort(new[np.argsort(r2, kind="stable")[: max(room, 0)]])
+            # the nearest, in the room the frame's own left (none where they were capped)
+            new = self._nearest(new, h.points, cfg.clustering.max_points - len(h.fg_idx))
             extra = cluster_points(h.points[new], cfg.clustering.eps_m, cfg.clustering.min_samples)
             extra[extra >= max(cfg.clustering.max_clusters - k, 0)] = -1
             if np.any(extra >= 0):
@@ -752,7 +725,7 @@ class TrackEstimator:
                 and np.any(hindsight[:j])
                 and (tid not in self._prefixes or self._prefixes[tid].frames[0] > r.frames[0])
             ):
-                self._prefixes[tid] = _cut(r, j)
+                self._prefixes[tid] = r.part(0, j)
         self._candidates = None
 
     def _forget_ended(self) -> None:
@@ -1285,10 +1258,10 @@ class TrackEstimator:
             for i, table in self._replayed_tables.items():
                 tables[i] = table
             records = [
-                _joined(self._prefixes[r.track_id], r) if r.track_id in self._prefixes else r
+                r.after(self._prefixes[r.track_id]) if r.track_id in self._prefixes else r
                 for r in self._tracker.records()
             ] + self._replayed
-            if n:
+            if n:  # over the clusters as found (the replay's are hindsight, not sightings)
                 records += find_lines(
                     self._tables, t_s, self.config.tracking, self._tracker.next_id, self._offset_s
                 )

@@ -85,7 +85,7 @@ object was: better than extrapolating the chain's motion back through it.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -437,20 +437,10 @@ def split_rigid(
             out.append(rec)
             continue
         for k, (a, b) in enumerate(zip(at_cuts[:-1], at_cuts[1:], strict=True)):
-            nis = rec.nis[a:b].copy()
+            part = rec.part(a, b)
+            nis = part.nis.copy()
             nis[0] = np.nan  # each part is born again
-            out.append(
-                TrackRecord(
-                    track_id=rec.track_id if k == 0 else next_id,
-                    frames=rec.frames[a:b],
-                    clusters=rec.clusters[a:b],
-                    positions=rec.positions[a:b],
-                    n_points=rec.n_points[a:b],
-                    nis=nis,
-                    speed=rec.speed[a:b],
-                    dt=None if rec.dt is None else rec.dt[a:b],
-                )
-            )
+            out.append(replace(part, track_id=rec.track_id if k == 0 else next_id, nis=nis))
             next_id += k > 0
     return out
 

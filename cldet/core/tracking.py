@@ -34,7 +34,7 @@ covariance is one 2x2 (see ``cldet.core.smoothing``).
 from __future__ import annotations
 
 from bisect import insort
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -169,6 +169,35 @@ class TrackRecord:
     def raw(self) -> NDArray[np.bool_]:
         """(H,) the detection came from the raw-point gate, not from a foreground cluster."""
         return self.clusters < 0
+
+    def part(self, start: int, stop: int) -> TrackRecord:
+        """Its detections ``start:stop``, under the same id."""
+        return replace(
+            self,
+            frames=self.frames[start:stop],
+            clusters=self.clusters[start:stop],
+            positions=self.positions[start:stop],
+            n_points=self.n_points[start:stop],
+            nis=self.nis[start:stop],
+            speed=self.speed[start:stop],
+            dt=None if self.dt is None else self.dt[start:stop],
+        )
+
+    def after(self, head: TrackRecord) -> TrackRecord:
+        """Its detections after those of ``head`` (all earlier than its first), under its id."""
+        dt = None
+        if head.dt is not None or self.dt is not None:
+            dt = np.concatenate([head.lags(), self.lags()])
+        return replace(
+            self,
+            frames=np.concatenate([head.frames, self.frames]),
+            clusters=np.concatenate([head.clusters, self.clusters]),
+            positions=np.concatenate([head.positions, self.positions]),
+            n_points=np.concatenate([head.n_points, self.n_points]),
+            nis=np.concatenate([head.nis, self.nis]),
+            speed=np.concatenate([head.speed, self.speed]),
+            dt=dt,
+        )
 
 
 def cross_section(
