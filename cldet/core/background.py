@@ -713,15 +713,18 @@ class BackgroundModel:
         cells, rng = directions if directions is not None else self.directions(points)
         return self._labels(cells, rng)
 
-    def vacated(self, points: NDArray[np.floating], n_bins: int) -> NDArray[np.bool_]:
+    def vacated(
+        self, points: NDArray[np.floating], n_bins: int, directions: Directions | None = None
+    ) -> NDArray[np.bool_]:
         """(N,) nothing returned at or in front of each point's range (by the margin) in its
         direction cell in each of the last ``n_bins`` finished bins: whatever was there then
-        has gone (farther returns, or none)."""
+        has gone (farther returns, or none); ``directions``: the points' cells and ranges
+        (``directions``) when already known."""
         p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
         b = min(n_bins, self.n_bins, self.cfg.window_bins)
         if len(p) == 0 or b <= 0:
             return np.zeros(len(p), dtype=bool)
-        cells, rng = self.directions(p)
+        cells, rng = directions if directions is not None else self.directions(p)
         slots = (self.n_bins - 1 - np.arange(b)) % self.cfg.window_bins
         recent = self._ring[cells[:, None], slots[None, :]].min(axis=1)
         return recent > rng + _margins(rng, self.cfg.margin_m, self.cfg.margin_fraction)

@@ -673,9 +673,10 @@ class TrackEstimator:
             t_s = float(self._times[index])
             table = self._tables[index]
             k = len(table)
-            now = np.flatnonzero(self.background.classify(h.points) == FOREGROUND)
+            cells, ranges = self.background.directions(h.points)
+            now = np.flatnonzero(self.background.classify(h.points, (cells, ranges)) == FOREGROUND)
             new = np.setdiff1d(now, h.fg_idx, assume_unique=True)
-            new = new[self.background.vacated(h.points[new], n_back)]
+            new = new[self.background.vacated(h.points[new], n_back, (cells[new], ranges[new]))]
             # the nearest, in the room the frame's own left (none where they were capped)
             new = self._nearest(new, h.points, cfg.clustering.max_points - len(h.fg_idx))
             extra = cluster_points(h.points[new], cfg.clustering.eps_m, cfg.clustering.min_samples)
