@@ -363,7 +363,19 @@ class TrackingConfig(BaseModel):
     link_max_gap_s: float = Field(
         default=8.0, gt=0, description="longest unseen gap bridged between tracks"
     )
-    link_speed: float = Field(default=10.0, gt=0, description="max mean speed across a bridged gap")
+    link_speed: float = Field(
+        default=10.0,
+        gt=0,
+        description="max mean speed across a bridged gap, m/s: from where the earlier track was"
+        " at its last detection before the gap, or from where its motion then carries it",
+    )
+    link_velocity_s: float = Field(
+        default=0.5,
+        ge=0,
+        description="a track's motion at a detection, which a link across a gap carries on: the"
+        " constant-velocity fit of its detections over this long up to it (0: links reach from"
+        " where it was only, so a pass faster than link_speed is never linked)",
+    )
     extend_gap_s: float = Field(
         default=0.5,
         ge=0,
@@ -477,7 +489,10 @@ class TrackingConfig(BaseModel):
         default=0.7, gt=0, description="a cluster this close to a line's position is on it"
     )
     line_min_hits: int = Field(
-        default=5, ge=3, description="frames with a cluster on a line before it is a candidate"
+        default=5,
+        ge=3,
+        description="distinct places on a line (2 line_tol_m apart along it: the centroid's"
+        " noise, not the scan's smear) with a cluster before it is a candidate",
     )
     line_seed_s: float = Field(
         default=1.0, gt=0, description="a line starts from two clusters at most this far apart"

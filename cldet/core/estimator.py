@@ -56,8 +56,8 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    ended), the velocity decaying from then. The lost chain's evidence keeps competing for
    ``link_max_gap_s`` (``tracking.causal_keep_lost``), as the refinement weighs whole chains:
    a track that could continue it (``_continues``: the refinement's link from the lost
-   track's last detection before the track's first, with the lost track's speed there added
-   to ``link_speed``) competes with the chain's evidence added to its own (counted whole,
+   track's last detection before the track's first, from where it was or where its motion
+   carried it, ``link_jump``) competes with the chain's evidence added to its own (counted whole,
    where the refinement counts a track only up to the next one's start), any other only once
    its own exceeds the chain's; a challenger must beat the followed chain's total by
    ``_SWITCH_RATIO``, what two continuations of one chain share cancelling. While no track is
@@ -123,6 +123,7 @@ from cldet.core.selection import (
     detection_weights,
     extend_chain,
     fixed_spread,
+    link_jump,
     link_reach,
     rigid_now,
     sampling_jitter,
@@ -142,6 +143,7 @@ from cldet.core.tracking import (
     cross_section,
     crowding,
     widen_box,
+    windowed_velocity,
 )
 from cldet.errors import FrameOrderError
 from cldet.stamps import NS_PER_S
@@ -325,7 +327,7 @@ class _Lost:
     score: float  # the chain's evidence when it was lost
     times_s: NDArray[np.float64]  # (H,) the lost track's detection times, s
     positions: NDArray[np.float64]  # (H,3) its detections
-    speed: NDArray[np.float64]  # (H,) its filtered speed after each, m/s
+    velocity: NDArray[np.float64]  # (H,3) its motion at each (``windowed_velocity``), m/s
 
 
 @dataclass
@@ -1068,13 +1070,14 @@ class TrackEstimator:
         rec = self._tracker.record(track_id)
         if rec is not None:
             times = self._times[rec.frames].copy()
-            self._lost = _Lost(self._value, times, rec.positions, rec.speed)
+            velocity = windowed_velocity(times, rec.positions, self.config.tracking.link_velocity_s)
+            self._lost = _Lost(self._value, times, rec.positions, velocity)
 
     def _continues(self, track_id: int) -> bool:
         """The track can continue the lost chain, as the refinement links tracks: from the
         lost track's last detection before the track's first, within ``link_max_gap_s``, the
-        jump is at most (``link_speed`` plus the lost track's speed there) times the gap plus
-        1 m (a fast pass reappears farther on)."""
+        jump (``link_jump``: from where it was, or from where its motion carried it; a fast
+        pass reappears farther on) is at most ``link_reach``."""
         lost, ev = self._lost, self._evidence.get(track_id)
         if lost is None or ev is None:
             return False
@@ -1083,9 +1086,15 @@ class TrackEstimator:
             return False
         tc = self.config.tracking
         gap = ev.first_t_s - float(lost.times_s[k])
-        jump = float(np.linalg.norm(ev.first_position - lost.positions[k]))
-        reach = float(link_reach(gap, tc, float(lost.speed[k])))
-        return gap <= tc.link_max_gap_s and jump <= reach
+        part = slice(k, k + 1)
+        jump = link_jump(
+            lost.times_s[part],
+            lost.positions[part],
+            lost.velocity[part],
+            ev.first_t_s,
+            ev.first_position,
+        )
+        return gap <= tc.link_max_gap_s and float(jump[0]) <= float(link_reach(gap, tc))
 
     def _follow(self, track_id: int | None, own: dict[int, float]) -> None:
         """Make ``track_id`` the causal choice (None: none); ``own``: the weighed evidence of

@@ -29,7 +29,8 @@ estimate runs it over its last few seconds, from seeds seen lately, while it fol
    the line is grown at both ends, each end predicted from the fit of its own nearest inliers
    (a pass that curves gently is followed piece by piece), until no frame within
    ``line_window_s`` of an end adds an inlier (a long straight pass bridges its unseen
-   stretches); a line with at least ``line_min_hits`` inliers
+   stretches); a line with inliers at ``line_min_hits`` distinct places or more (``_places``:
+   static clutter seen over and over is one place)
    becomes a candidate track and its detections are taken (no other line may use them).
 
 The lines are candidate tracks like the tracker's: ``cldet.core.selection`` scores them with
@@ -408,7 +409,10 @@ def _sweep_deg(p: NDArray[np.float64]) -> float:
 
 
 def _places(p: NDArray[np.float64], v: NDArray[np.float64], size: float) -> int:
-    """Distinct places of ``size`` metres along direction ``v`` that the points ``p`` occupy."""
+    """Distinct places of ``size`` metres along direction ``v`` that the points ``p`` occupy.
+    ``find_lines`` sizes them by the centroid's noise (2 ``line_tol_m``), not by the line's
+    tolerance: that includes the scan's smear (a timing spread), and at 20 m/s would merge
+    the sightings of consecutive scans, 2 m apart, into one place."""
     speed = float(np.linalg.norm(v))
     if speed == 0.0:
         return 1
@@ -465,7 +469,7 @@ def find_lines(
         if (
             speed < cfg.line_min_speed
             or speed > cfg.max_speed
-            or _places(p, v, 2.0 * tol) < cfg.line_min_hits
+            or _places(p, v, 2.0 * cfg.line_tol_m) < cfg.line_min_hits
             or _sweep_deg(p) < cfg.line_min_sweep_deg
         ):
             continue

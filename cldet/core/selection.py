@@ -59,8 +59,10 @@ A track's first detection does not count (anything can start a track: persistenc
 the following detections show); tracks of a single detection are not candidates. The drone's record is often several tracks
 (long unseen stretches, a detection stolen by clutter). A chain is the sequence of tracks
 maximising the summed scores, where track A links to a later-starting track B if the jump
-from A's last detection before B starts to B's first is at most
-``link_speed * gap + 1 m`` within ``link_max_gap_s``; A then counts only up to B's start, and
+from A's last detection before B starts to B's first is at most ``link_speed * gap + 1 m``
+within ``link_max_gap_s``, the jump taken from where A was there or from where A's motion
+then (``link_velocity_s``) carries it, whichever is nearer (``link_jump``: a pass at 20 m/s is
+no slower across a gap than while it is seen); A then counts only up to B's start, and
 each link costs 2 detections' worth. A track that followed the drone out of sight may coast on
 onto single returns that its gate happens to catch, leading away until the drone reappears
 farther from the tail's end than any speed allows: the link may then leave A at its latest
@@ -98,6 +100,7 @@ from cldet.core.tracking import (
     ClusterTable,
     TrackRecord,
     constant_velocity_fit,
+    windowed_velocity,
 )
 
 __all__ = [
@@ -107,6 +110,7 @@ __all__ = [
     "detection_weights",
     "extend_chain",
     "fixed_spread",
+    "link_jump",
     "link_reach",
     "rigid_now",
     "sampling_jitter",
@@ -135,6 +139,8 @@ class ScoredTrack:
     record: TrackRecord
     times_s: NDArray[np.float64]  # (H,) detection times, s
     positions: NDArray[np.float64]  # (H,3) cluster centroids, metres
+    # (H,3) its motion at each detection, m/s (``windowed_velocity`` over ``link_velocity_s``)
+    velocity: NDArray[np.float64]
     contribution: NDArray[np.float64]  # (H,) each detection's weight in the score
     score: float
     cross: NDArray[np.float64] | None = None  # (H,) cross-section, m^2 (``cross_section``)
@@ -278,6 +284,7 @@ def score_tracks(
                 record=rec,
                 times_s=times_s[rec.frames],
                 positions=rec.positions,
+                velocity=windowed_velocity(times_s[rec.frames], rec.positions, cfg.link_velocity_s),
                 contribution=contribution,
                 score=float(contribution.sum()),
                 cross=det.cross,
@@ -446,12 +453,29 @@ def split_rigid(
 
 
 def link_reach(
-    gap_s: NDArray[np.float64] | float, cfg: TrackingConfig, speed_mps: float = 0.0
+    gap_s: NDArray[np.float64] | float, cfg: TrackingConfig
 ) -> NDArray[np.float64] | float:
-    """How far a track may start from another's detection ``gap_s`` earlier and still link to
-    it: ``link_speed`` (plus ``speed_mps``, the earlier track's own speed there, where known)
-    times the gap, plus 1 m."""
-    return (cfg.link_speed + speed_mps) * gap_s + 1.0
+    """How far a track may start from where another's detection ``gap_s`` earlier puts it
+    (``link_jump``) and still link to it: ``link_speed`` times the gap, plus 1 m."""
+    return cfg.link_speed * gap_s + 1.0
+
+
+def link_jump(
+    times_s: NDArray[np.float64],
+    positions: NDArray[np.float64],
+    velocity: NDArray[np.float64],
+    t0: float,
+    p0: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Per detection of a track (``times_s``, ``positions``, its ``velocity`` there), how far a
+    track starting at ``t0`` at ``p0`` lies from it: from where it was, or from where its motion
+    carries it by ``t0``, whichever is nearer. A drone that stopped or turned back is near the
+    first; one that flew on unseen (a pass at 20 m/s is no slower across a gap than while it is
+    seen), near the second; one moving the other way at speed, near neither."""
+    dt = (t0 - times_s)[:, None]
+    rest = np.linalg.norm(positions - p0, axis=1)
+    carried = np.linalg.norm(positions + velocity * dt - p0, axis=1)
+    return np.asarray(np.minimum(rest, carried), dtype=np.float64)
 
 
 def _link_cut(ta: ScoredTrack, t0: float, p0: NDArray[np.float64], cfg: TrackingConfig) -> int:
@@ -466,7 +490,7 @@ def _link_cut(ta: ScoredTrack, t0: float, p0: NDArray[np.float64], cfg: Tracking
     if cfg.link_tail_ratio <= 0:
         lo = hi - 1
     gap = t0 - ta.times_s[lo:hi]
-    jump = np.linalg.norm(ta.positions[lo:hi] - p0, axis=1)
+    jump = link_jump(ta.times_s[lo:hi], ta.positions[lo:hi], ta.velocity[lo:hi], t0, p0)
     ok = np.flatnonzero(jump <= link_reach(gap, cfg))
     if not len(ok):
         return 0

@@ -229,6 +229,33 @@ def constant_velocity_fit(
     return mean, v, tm
 
 
+def windowed_velocity(
+    t: NDArray[np.float64], p: NDArray[np.float64], window_s: float
+) -> NDArray[np.float64]:
+    """(H,3) per detection, the least-squares constant velocity (``constant_velocity_fit``) of
+    the detections ``p`` at times ``t`` (H,) (increasing) taken at most ``window_s`` before it,
+    itself included: the object's motion as seen up to then (zero where those detections share
+    one time)."""
+    h = len(t)
+    if h == 0:
+        return np.zeros((0, 3))
+    tt = t - t[0]  # the sums are taken from the first detection on: no cancellation
+    first = np.searchsorted(tt, tt - window_s, side="left")
+    last = np.arange(1, h + 1)
+    s_t = np.concatenate([[0.0], np.cumsum(tt)])
+    s_tt = np.concatenate([[0.0], np.cumsum(tt * tt)])
+    s_p = np.vstack([np.zeros(3), np.cumsum(p, axis=0)])
+    s_tp = np.vstack([np.zeros(3), np.cumsum(tt[:, None] * p, axis=0)])
+    n = (last - first).astype(np.float64)
+    st, stt = s_t[last] - s_t[first], s_tt[last] - s_tt[first]
+    sp, stp = s_p[last] - s_p[first], s_tp[last] - s_tp[first]
+    den = stt - st * st / n
+    ok = den > 1e-12 * np.maximum(stt, 1.0)
+    v = np.zeros((h, 3))
+    v[ok] = (stp[ok] - st[ok, None] * sp[ok] / n[ok, None]) / den[ok, None]
+    return v
+
+
 @dataclass(frozen=True)
 class ActiveTracks:
     """The active candidate tracks' Kalman states (per axis: position, velocity)."""

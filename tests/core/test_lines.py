@@ -112,6 +112,19 @@ def test_a_line_collects_only_the_movers_sightings() -> None:
     assert line.speed[0] == pytest.approx(15.0, abs=0.1)
 
 
+def test_a_fast_pass_seen_in_bursts_of_consecutive_scans_is_a_line() -> None:
+    # 22 m/s, seen in three bursts of consecutive scans (5 sightings in all): the scan's smear
+    # widens the line's tolerance, but consecutive sightings 2.2 m apart are distinct places
+    # of the pass, not one place seen twice (a place is the centroid's noise, line_tol_m)
+    times = np.arange(N_FRAMES, dtype=np.float64) * PERIOD_S
+    path = np.array([25.0, -60.0, 10.0]) + np.outer(times, [0.0, 22.0, 0.0])
+    seen = {10, 11, 18, 19, 27}
+    frames = [path[k : k + 1] if k in seen else np.zeros((0, 3)) for k in range(N_FRAMES)]
+    lines = _lines(frames)
+    assert len(lines) == 1
+    assert set(lines[0].frames.tolist()) == seen
+
+
 def test_lone_returns_along_one_beam_make_no_line() -> None:
     # noise along three fixed beams at random ranges: a line running along a beam meets it by
     # chance; the line must sweep line_min_sweep_deg as seen from the sensor

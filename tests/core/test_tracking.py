@@ -8,7 +8,14 @@ import numpy as np
 
 from cldet.config import TrackingConfig
 from cldet.core.selection import ScoredTrack, extend_chain, score_tracks, select_chain
-from cldet.core.tracking import CandidateTracker, ClusterTable, TrackRecord, crowding
+from cldet.core.tracking import (
+    CandidateTracker,
+    ClusterTable,
+    TrackRecord,
+    constant_velocity_fit,
+    crowding,
+    windowed_velocity,
+)
 
 GROUND = -1.5
 
@@ -201,9 +208,14 @@ def test_crowding_counts_neighbours_about_as_substantial_within_the_radius() -> 
 
 
 def _scored(
-    track_id: int, times: np.ndarray, positions: np.ndarray, points: np.ndarray
+    track_id: int,
+    times: np.ndarray,
+    positions: np.ndarray,
+    points: np.ndarray,
+    cfg: TrackingConfig | None = None,
 ) -> ScoredTrack:
-    """A scored track whose detections each weigh 1."""
+    """A scored track whose detections each weigh 1 (its motion as ``score_tracks`` takes it
+    under ``cfg``, default the defaults)."""
     h = len(times)
     rec = TrackRecord(
         track_id,
@@ -214,7 +226,8 @@ def _scored(
         np.ones(h),
         np.zeros(h),
     )
-    return ScoredTrack(rec, times, positions, np.ones(h), float(h))
+    velocity = windowed_velocity(times, positions, (cfg or TrackingConfig()).link_velocity_s)
+    return ScoredTrack(rec, times, positions, velocity, np.ones(h), float(h))
 
 
 def _lost_then_found(tail_points: int) -> tuple[ScoredTrack, ScoredTrack]:
@@ -245,6 +258,29 @@ def test_a_link_drops_a_tail_of_single_returns_that_strayed_but_not_a_steady_tra
     a, b = _lost_then_found(tail_points=1)
     off = TrackingConfig(link_tail_ratio=0.0)
     assert [tr.record.track_id for tr, _, _ in select_chain([a, b], off)] == [1]
+
+
+def test_a_link_carries_the_earlier_tracks_motion_across_the_gap() -> None:
+    # a pass at 18 m/s tracked for 1 s, unseen for 0.8 s, then tracked again 14.4 m on: beyond
+    # link_speed's reach from where it was last seen, within it from where its motion carried
+    # it (a drone cruising at 15-23 m/s is no slower across a gap than while it is seen)
+    cfg = TrackingConfig()
+
+    def path(t: np.ndarray, speed: float = 18.0) -> np.ndarray:
+        return np.column_stack([-20.0 + speed * t, np.full(len(t), 15.0), np.full(len(t), 5.0)])
+
+    t_a, t_b = np.arange(10) * 0.1, 1.7 + np.arange(10) * 0.1
+    a, b = _scored(1, t_a, path(t_a), np.full(10, 2)), _scored(2, t_b, path(t_b), np.full(10, 2))
+    assert np.linalg.norm(b.positions[0] - a.positions[-1]) > cfg.link_speed * 0.8 + 1.0
+    assert [tr.record.track_id for tr, _, _ in select_chain([a, b], cfg)] == [1, 2]
+    # the switch off: reached from where it was only
+    off = TrackingConfig(link_velocity_s=0.0)
+    assert len(select_chain([_scored(1, t_a, path(t_a), np.full(10, 2), off), b], off)) == 1
+    # the same jump from a track that ended there moving the other way at speed: no link (its
+    # speed added to the reach in every direction would allow it)
+    away = a.positions[-1] + np.outer(t_a - t_a[-1], [-18.0, 0.0, 0.0])
+    back = _scored(1, t_a, away, np.full(10, 2))
+    assert len(select_chain([back, b], cfg)) == 1
 
 
 def _weak(tr: ScoredTrack, weight: float) -> ScoredTrack:
@@ -397,3 +433,15 @@ def test_a_fast_drone_dated_inside_the_scan_is_tracked_with_the_right_speed() ->
     assert np.nanmedian(rec.nis[5:]) < 3.0  # chi^2, 3 dof: a consistent filter's median is 2.4
     blind = records(known=False)
     assert len(blind) > 1 and max(len(r.frames) for r in blind) < n / 2
+
+
+def test_windowed_velocity_is_the_fit_of_each_detections_recent_past() -> None:
+    rng = np.random.default_rng(5)
+    t = np.cumsum(rng.uniform(0.05, 0.3, 40))
+    p = rng.normal(size=(40, 3))
+    v = windowed_velocity(t, p, 0.5)
+    for k in range(40):
+        recent = (t >= t[k] - 0.5) & (t <= t[k])
+        fit = constant_velocity_fit(t[recent], p[recent])[1] if recent.sum() > 1 else np.zeros(3)
+        np.testing.assert_allclose(v[k], fit, atol=1e-9)
+    assert not windowed_velocity(t, p, 0.0).any()  # each detection alone: no motion
