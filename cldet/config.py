@@ -622,6 +622,18 @@ class SmoothingConfig(BaseModel):
         " sensors saw through that spot before) came to rest there and was learned as"
         " background: its position is held there, not carried on (with unseen_check_s > 0)",
     )
+    ground_stop_m: float = Field(
+        default=0.0,
+        ge=0,
+        description="beyond the detections a track's carried-on motion stops where it would"
+        " pass more than this below the ground (the plane and height map, the lower of the"
+        " two): a drone flies above the ground, so a path that runs into it did not carry on"
+        " (it came up from a take-off or a hover there, or went down to land); the position"
+        " holds where the path met it. 0: off, the default: it is only as good as the ground,"
+        " and the fitted plane is often wrong where little ground is seen (an urban canyon, a"
+        " forest edge); with a known mount (sensor.ground_from_pose) the plane is right, but"
+        " that was not measured (try 1 m)",
+    )
 
 
 class BiasConfig(BaseModel):

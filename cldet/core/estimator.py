@@ -256,6 +256,7 @@ class Candidates:
     times_s: NDArray[np.float64]  # (F,) each frame's observation time, s from the first stamp
     stamps_ns: NDArray[np.int64]  # (F,)
     view: StaticView | None = None  # the static scene after the last frame (None: unknown)
+    ground: GroundModel | None = None  # the ground after the last frame (None: unknown)
 
 
 class Estimator(Protocol):
@@ -1278,7 +1279,12 @@ class TrackEstimator:
             records = split_rigid(records, tables, t_s, self.config.tracking)
             stamps = np.asarray(self._stamps, dtype=np.int64)
             self._candidates = Candidates(
-                records, tables, t_s, stamps, self.background.view(onset=True)
+                records,
+                tables,
+                t_s,
+                stamps,
+                self.background.view(onset=True),
+                self.background.ground,
             )
         return self._candidates
 
@@ -1379,6 +1385,8 @@ def refine_candidates(
         origin, velocity, hold_s = ends[k_end]
         dt = t_s[f] - t_obs[first if f < first else last] - offset_s
         pos[f], var[f] = extrapolate(origin, velocity, sm.cov[k_end], dt, q, taus[k_end], hold_s)
+    if cand.ground is not None and sc.ground_stop_m > 0:
+        _stop_at_ground(pos, first, last, cand.ground, sc.ground_stop_m)
     pos = apply_bias(pos, cfg.bias)
 
     estimates = []
@@ -1505,6 +1513,25 @@ def _stop_unseen(
         if hidden:
             out[key] = (origin, np.zeros(3), 0.0)
     return out
+
+
+def _stop_at_ground(
+    pos: NDArray[np.float64], first: int, last: int, ground: GroundModel, margin_m: float
+) -> None:
+    """In place: the extrapolated positions ``pos`` before row ``first`` and after row ``last``
+    (the detections' span), each path followed outwards from its end: where it runs more than
+    ``margin_m`` below the ground (``GroundModel.depth_below``; the margin keeps the ground's
+    own unevenness and a drone flying low from stopping it), it is held from where it met the
+    ground: its last position above the ground before that, or the end's own
+    (``smoothing.ground_stop_m``)."""
+    for end, rows in ((first, np.arange(first - 1, -1, -1)), (last, np.arange(last + 1, len(pos)))):
+        path = np.concatenate([[end], rows])  # from the end row outwards
+        depth = ground.depth_below(pos[path])
+        under = np.flatnonzero(depth > margin_m)
+        if len(under):
+            above = np.flatnonzero(depth[: under[0]] <= 0.0)
+            k = int(above[-1]) if len(above) else 0
+            pos[path[k + 1 :]] = pos[path[k]]
 
 
 CLASS_EVERY_S = 1.0

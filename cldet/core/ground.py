@@ -201,6 +201,21 @@ class GroundModel:
         # a point below everything static around it stands on what it is (height 0 at least)
         return h - np.minimum(local, h)
 
+    def depth_below(self, points: NDArray[np.floating]) -> NDArray[np.float64]:
+        """How far each point (N,3) lies below the ground, metres (negative: above it; NaN
+        before a fit). The ground here is the lower of the plane and the local height map (the
+        street below a roof edge lowers it; a slope rising above the plane, or a wall whose foot
+        is hidden, does not raise it): a point counts as below only where it is below both."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        h = self.plane_height(p)
+        if self.normal is None or len(p) == 0:
+            return -h
+        i, j, inside = self._cells(p)
+        local = np.zeros(len(p))
+        local[inside] = self._map[i[inside], j[inside]]
+        local[~np.isfinite(local)] = 0.0
+        return np.minimum(local, 0.0) - h
+
 
 @numba.njit(cache=True)
 def _in_view_kernel(

@@ -960,6 +960,45 @@ def test_a_track_whose_end_came_to_rest_there_is_held_even_where_it_could_have_g
     assert np.linalg.norm(off[-1] - last) > 2.0
 
 
+def test_a_path_carried_back_into_the_ground_stops_where_it_meets_it() -> None:
+    # a drone rests 0.5 m above level ground 10 m in front of a sensor 2 m up (unseen: learned
+    # with the scene), then climbs away at 2 m/s up and 2 m/s along y from scan 30 of 60, seen
+    # from then on. Carried back, its climb runs metres into the ground; a drone flies above
+    # the ground: the path stops where it meets it, near where the drone rested
+    from cldet.core.estimator import Candidates, refine_candidates
+    from cldet.core.ground import GroundModel
+    from cldet.core.tracking import ClusterTable, TrackRecord
+
+    n, seen = 60, np.arange(30, 60)
+    t_s = 0.1 * np.arange(n)
+    rest = np.array([10.0, 0.0, -1.5])
+    truth = rest + np.outer(np.maximum(t_s - 3.0, 0.0), [0.0, 2.0, 2.0])
+    one = np.ones(1, dtype=np.int64)
+    tables = [
+        ClusterTable(truth[k][None, :], np.full(1, 0.3), 10 * one, 10 * one, 0 * one)
+        if k in seen
+        else ClusterTable.from_clusters(())
+        for k in range(n)
+    ]
+    h = len(seen)
+    rec = TrackRecord(
+        0, seen, np.zeros(h, np.int64), truth[seen], np.full(h, 10), np.ones(h), np.full(h, 2.8)
+    )
+    ground = GroundModel(plane=GroundModel.from_pose(2.0, 0.0, 0.0))
+    stamps = np.arange(n) * 100_000_000
+
+    def before(stop_m: float) -> np.ndarray:
+        cfg = _instant_scans({"ground_stop_m": stop_m})
+        est = refine_candidates(Candidates([rec], tables, t_s, stamps, None, ground), cfg)
+        return np.array([e.position for e in est.estimates])[:30]
+
+    carried = before(0.0)
+    assert ground.depth_below(carried).max() > 2.0  # 2.05 m under the ground at the start
+    stopped = before(1.0)
+    assert ground.depth_below(stopped).max() <= 0.0
+    assert _rms(stopped - truth[:30]) < 0.5 * _rms(carried - truth[:30])  # 0.30 against 1.51 m
+
+
 def test_the_background_warm_up_is_no_evidence_that_a_drone_was_not_there() -> None:
     # a drone first detected in scan 3 in a straight transit at 3.5 m/s: carried back, its path
     # lies in open view, and the scene at its first detection could hide a drone that hovered

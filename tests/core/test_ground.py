@@ -59,6 +59,19 @@ def test_the_street_below_a_roof_edge_is_the_local_ground() -> None:
     np.testing.assert_allclose(h, [3.0, 1.5], atol=0.1)
 
 
+def test_below_the_ground_is_below_both_the_plane_and_the_local_ground() -> None:
+    # the roof scene above: under the roof is below the ground; beyond its edge, above the
+    # street but 5 m below the roof's plane, is not; under the street is
+    rng = np.random.default_rng(3)
+    roof = np.stack([rng.uniform(-6, 6, 3000), rng.uniform(-6, 6, 3000), np.full(3000, -1.0)], 1)
+    street = np.stack([rng.uniform(10, 30, 600), rng.uniform(-20, 20, 600), np.full(600, -11.0)], 1)
+    model = GroundModel()
+    assert np.isnan(model.depth_below(np.zeros((1, 3)))).all()  # no fit: unknown
+    assert model.fit(np.concatenate([roof, street]))
+    probe = np.array([[2.0, 2.0, -4.0], [20.0, 0.0, -6.0], [20.0, 0.0, -13.0], [2.0, 2.0, 1.0]])
+    np.testing.assert_allclose(model.depth_below(probe), [3.0, -5.0, 2.0, -2.0], atol=0.1)
+
+
 def test_no_plane_from_points_above_the_sensor_only() -> None:
     rng = np.random.default_rng(4)
     model = GroundModel()

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from cldet.core.stats import (
+    box_minimum,
     column_medians,
     median,
     median_of_sorted,
@@ -66,3 +67,16 @@ def test_column_medians_equal_numpys_exactly() -> None:
         np.testing.assert_array_equal(column_medians(a), np.median(a, axis=0))
         a[0, 1] = np.nan
         np.testing.assert_array_equal(column_medians(a), np.median(a, axis=0))
+
+
+@pytest.mark.parametrize("size", [1, 3, 5])
+@pytest.mark.parametrize("wrap", [True, False])
+def test_box_minimum_is_scipys_minimum_filter(size: int, wrap: bool) -> None:
+    from scipy.ndimage import minimum_filter
+
+    a = np.random.default_rng(size).uniform(0.0, 50.0, (12, 30)).astype(np.float32)
+    a[a > 40.0] = np.inf  # cells with no static range
+    cols = "wrap" if wrap else "nearest"
+    np.testing.assert_array_equal(
+        box_minimum(a, size, wrap), minimum_filter(a, size, mode=("nearest", cols))
+    )
