@@ -194,10 +194,7 @@ class GroundModel:
         h = self.plane_height(p)
         if self.normal is None or len(p) == 0:
             return h
-        i, j, inside = self._cells(p)
-        local = np.zeros(len(p))
-        local[inside] = self._map[i[inside], j[inside]]
-        local[~np.isfinite(local)] = 0.0  # nothing static seen there: the plane
+        local = self._local(p)
         # a point below everything static around it stands on what it is (height 0 at least)
         return h - np.minimum(local, h)
 
@@ -210,11 +207,16 @@ class GroundModel:
         h = self.plane_height(p)
         if self.normal is None or len(p) == 0:
             return -h
+        return np.minimum(self._local(p), 0.0) - h
+
+    def _local(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(N,) the local ground's height above the plane under each point (the height map's
+        lowest static height within one cell; 0, the plane, where nothing static was seen)."""
         i, j, inside = self._cells(p)
         local = np.zeros(len(p))
         local[inside] = self._map[i[inside], j[inside]]
-        local[~np.isfinite(local)] = 0.0
-        return np.minimum(local, 0.0) - h
+        local[~np.isfinite(local)] = 0.0  # nothing static seen there: the plane
+        return local
 
 
 @numba.njit(cache=True)
