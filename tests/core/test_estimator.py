@@ -27,6 +27,7 @@ from cldet.core.estimator import (
 )
 from cldet.core.frames import pair_frames, valid_points
 from cldet.core.methods import estimate_sequence, make_estimator
+from cldet.core.tracking import ClusterTable, TrackRecord
 from cldet.errors import FrameOrderError
 from cldet.types import Cluster, Estimate, LidarFrame, PositionSample, Source
 
@@ -873,6 +874,26 @@ def test_a_transit_seen_for_half_a_second_keeps_its_velocity_for_a_while(
     assert worst_beyond(0.0) > 3.0  # 4.4 and 3.8 m: the straight run's rule off
 
 
+def _one_track(
+    n: int, seen: np.ndarray, positions: np.ndarray, speed: float
+) -> tuple[list[ClusterTable], TrackRecord]:
+    """``n`` frames' cluster tables with one cluster (ten points, 0.3 m) at ``positions`` in the
+    frames ``seen`` and none elsewhere, and the one track over them (filtered ``speed``)."""
+    one = np.ones(1, dtype=np.int64)
+    at = dict(zip(seen.tolist(), positions, strict=True))
+    tables = [
+        ClusterTable(at[k][None, :], np.full(1, 0.3), 10 * one, 10 * one, 0 * one)
+        if k in at
+        else ClusterTable.from_clusters(())
+        for k in range(n)
+    ]
+    h = len(seen)
+    rec = TrackRecord(
+        0, seen, np.zeros(h, np.int64), positions, np.full(h, 10), np.ones(h), np.full(h, speed)
+    )
+    return tables, rec
+
+
 def _walk_then_unseen(
     view_ranges: dict[int, float],
     check_s: float = 1.0,
@@ -887,22 +908,11 @@ def _walk_then_unseen(
     (estimates (60,3), its last detection)"""
     from cldet.core.background import NO_ONSET, StaticView, direction_cells
     from cldet.core.estimator import Candidates, refine_candidates
-    from cldet.core.tracking import ClusterTable, TrackRecord
 
     cfg = _instant_scans({"unseen_check_s": check_s, "came_to_rest": rest})
     n, seen = 60, np.arange(10, 30)
     pos = np.array([[10.0, -3.0 + 0.2 * (k - 10), 2.0] for k in seen])
-    one = np.ones(1, dtype=np.int64)
-    tables = [
-        ClusterTable(pos[k - 10][None, :], np.full(1, 0.3), 10 * one, 10 * one, 0 * one)
-        if k in seen
-        else ClusterTable.from_clusters(())
-        for k in range(n)
-    ]
-    h = len(seen)
-    rec = TrackRecord(
-        0, seen, np.zeros(h, np.int64), pos, np.full(h, 10), np.ones(h), np.full(h, 2.0)
-    )
+    tables, rec = _one_track(n, seen, pos, 2.0)
     bc = cfg.background
     around = np.full(90 * 180, np.inf, dtype=np.float32)
     for cell, r in view_ranges.items():
@@ -967,23 +977,12 @@ def test_a_path_carried_back_into_the_ground_stops_where_it_meets_it() -> None:
     # the ground: the path stops where it meets it, near where the drone rested
     from cldet.core.estimator import Candidates, refine_candidates
     from cldet.core.ground import GroundModel
-    from cldet.core.tracking import ClusterTable, TrackRecord
 
     n, seen = 60, np.arange(30, 60)
     t_s = 0.1 * np.arange(n)
     rest = np.array([10.0, 0.0, -1.5])
     truth = rest + np.outer(np.maximum(t_s - 3.0, 0.0), [0.0, 2.0, 2.0])
-    one = np.ones(1, dtype=np.int64)
-    tables = [
-        ClusterTable(truth[k][None, :], np.full(1, 0.3), 10 * one, 10 * one, 0 * one)
-        if k in seen
-        else ClusterTable.from_clusters(())
-        for k in range(n)
-    ]
-    h = len(seen)
-    rec = TrackRecord(
-        0, seen, np.zeros(h, np.int64), truth[seen], np.full(h, 10), np.ones(h), np.full(h, 2.8)
-    )
+    tables, rec = _one_track(n, seen, truth[seen], 2.8)
     ground = GroundModel(plane=GroundModel.from_pose(2.0, 0.0, 0.0))
     stamps = np.arange(n) * 100_000_000
 
