@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Final, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from cldet.errors import ConfigError
 
@@ -52,16 +52,28 @@ class FramesConfig(BaseModel):
         description="a frame's points are dated at its stamp plus this (the middle of the"
         " Mid-360's 100 ms scan): a fast drone's estimate no longer leads the truth",
     )
-    point_times: bool = Field(
-        default=False,
-        description="date each point at its own firing time where the cloud recorded it (the"
-        " MMAUD arrays' row order, a 'time' field): a cluster is seen at its points' mean time,"
-        " which the tracker and the smoother use (a drone at 16 m/s moves 1.6 m in a scan)."
-        " Off by default: on 400 development worlds it helped fast passes (refined failures"
-        " 25 -> 23, causal 32 -> 24 of 66) but broke close drones (2 -> 7, 5 -> 8 of 57), whose"
-        " wide clusters' centroids jitter more than the filter's centroid noise, which a lag"
-        " then turns into speed. Off, or where not recorded: every point at scan_offset_s",
+    point_times: Literal["off", "fit", "track"] = Field(
+        default="fit",
+        description="where a cloud records each point's firing time (the MMAUD arrays' row"
+        " order, a 'time' field), a cluster is seen at its points' mean time: a drone at 20 m/s"
+        " moves 2 m in a scan, and a return dated at the scan's middle is off by up to 1 m along"
+        " its path. 'fit': the fits over a track's detections use it (the line search, the"
+        " refinement's smoother and straight runs), while the tracker's association and filter"
+        " take each cluster at the frame's time; 'track': the tracker too (H = [1, lag]), which"
+        " broke close drones on development worlds (a close drone's centroid jitters by"
+        " decimetres between detections the lags put 0.04 s apart, which a young track takes"
+        " as speed); 'off' (or times not recorded): every point at scan_offset_s. true and"
+        " false, the switch's former values, mean 'track' and 'off'",
     )
+
+    @field_validator("point_times", mode="before")
+    @classmethod
+    def _point_times_from_bool(cls, value: object) -> object:
+        """The switch was a bool: true dated clusters in the tracker and the smoother."""
+        if isinstance(value, bool):
+            return "track" if value else "off"
+        return value
+
     avia_xyz_m: tuple[float, float, float] = Field(
         default=(0.0, 0.0, 0.0),
         description="the Avia's origin in the LiDAR's frame, used when a log's /tf_static does"

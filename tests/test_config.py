@@ -88,3 +88,15 @@ def test_field_of_view_cut_settings_are_validated() -> None:
     assert cfg.tracking.fov_cut_m == 0.0
     with pytest.raises(ConfigError, match="fov_bottom_deg"):
         load_config(overrides={"tracking": {"fov_bottom_deg": 5.0}})
+
+
+def test_point_times_keeps_the_former_bool_values(tmp_path: Path) -> None:
+    # the switch was a bool (true: dated in the tracker and the smoother); a YAML written then
+    # still loads, with the same meaning
+    path = tmp_path / "cfg.yaml"
+    path.write_text("frames:\n  point_times: true\n")
+    assert load_config(path).frames.point_times == "track"
+    assert load_config(overrides={"frames": {"point_times": False}}).frames.point_times == "off"
+    assert load_config().frames.point_times == "fit"
+    with pytest.raises(ConfigError, match=r"frames\.point_times.*'off', 'fit' or 'track'"):
+        load_config(overrides={"frames": {"point_times": "sometimes"}})

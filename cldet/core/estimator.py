@@ -24,11 +24,12 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    the isolated blob there is carved out as a cluster of its own (``tracking.carve_gate_m``,
    ``cldet.core.tracking.carve_tracked``: rain near the sensor chains into one wide cluster
    that a close drone joins);
-4. every cluster seeds or extends a candidate Kalman track (``cldet.core.tracking``), at the
-   time its points were taken: their mean firing time where the clouds record it
-   (``frames.point_times``, ``fuse_timed``), else the stamp plus ``frames.scan_offset_s``,
-   the middle of the scan; the refinement's smoother measures each detection at its own time
-   too; a confirmed moving track that gets no cluster continues on the raw points near its
+4. every cluster seeds or extends a candidate Kalman track (``cldet.core.tracking``), taken at
+   the frame's time (the stamp plus ``frames.scan_offset_s``, the middle of the scan); each
+   detection keeps when its points were taken, their mean firing time where the clouds record
+   it (``fuse_timed``), and the fits over a track's detections (the line search, the
+   refinement's smoother and straight runs) measure it there (``frames.point_times``: 'fit';
+   'track' dates it in the tracker's filter too, 'off' nowhere); a confirmed moving track that gets no cluster continues on the raw points near its
    prediction; the points of confirmed small moving tracks are withheld from the background
    (``background.protect_tracks``), so a drone that stops to hover is not learned: once their
    half-second mean lies ``background.protect_min_moved_m`` from its first value, or while
@@ -448,7 +449,7 @@ def _timed(
     fc = cfg.frames
     p = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
     keep = valid_mask(p, fc.min_range_m, fc.max_range_m)
-    if times is None or len(times) != len(p) or not fc.point_times:
+    if times is None or len(times) != len(p) or fc.point_times == "off":
         t = np.full(len(p), fc.scan_offset_s, dtype=np.float32)
     else:
         t = np.asarray(times, dtype=np.float32) + np.float32(shift_s)
@@ -462,7 +463,7 @@ def fuse_timed(
 ) -> tuple[NDArray[np.float32], int, NDArray[np.float32]]:
     """``fuse_points`` and each point's time after the frame's stamp, seconds: its firing time
     where the cloud recorded it (``Cloud.times``; the Avia's counted from its own stamp) and
-    ``frames.point_times`` is on, else the middle of the scan (``frames.scan_offset_s``)."""
+    ``frames.point_times`` is not 'off', else the middle of the scan (``frames.scan_offset_s``)."""
     mid, t_mid = _timed(frame.mid360, frame.mid360_times, 0.0, cfg)
     lag = 0.0 if frame.avia_stamp_ns is None else (frame.avia_stamp_ns - frame.stamp_ns) / NS_PER_S
     avia, t_avia = _timed(frame.avia, frame.avia_times, lag, cfg)
@@ -501,7 +502,8 @@ class TrackEstimator:
             if sensor.ground_from_pose
             else None,
         )
-        self._tracker = CandidateTracker(config.tracking)
+        dated = config.frames.point_times == "track"
+        self._tracker = CandidateTracker(config.tracking, dated=dated)
         self._stamps: list[int] = []
         self._tables: list[ClusterTable] = []
         self._times = np.zeros(1024)  # observation time of each frame, s from the first stamp
@@ -632,7 +634,7 @@ class TrackEstimator:
             # the clusters' lags (None: all seen at the frame's time, the points undated)
             dt = (
                 _cluster_lags(labels, p_times[fg_idx], len(clusters), self._offset_s)
-                if cfg.frames.point_times
+                if cfg.frames.point_times != "off"
                 else None
             )
             table = replace(
@@ -670,7 +672,7 @@ class TrackEstimator:
             return
         cfg = self.config
         n_back = max(cfg.background.seen_through_bins, 1)
-        tracker = CandidateTracker(cfg.tracking)
+        tracker = CandidateTracker(cfg.tracking, dated=cfg.frames.point_times == "track")
         added: list[int] = []
         for index, h in enumerate(head):
             t_s = float(self._times[index])

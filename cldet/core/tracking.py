@@ -9,10 +9,14 @@ whole-sequence evidence. Per frame:
    PSD ``accel_psd``);
 2. cluster j may join track i if its normalised innovation squared |z - p|^2 / S is below
    ``gate_chi2`` (chi^2 with 3 dof; S = predicted position variance + centroid variance)
-   and |z - p| is below ``max_gate_m``. A cluster seen ``lag`` after the frame's time (its
-   points' mean firing time, ``ClusterTable.dt``) measures the position then: p + lag v, with
+   and |z - p| is below ``max_gate_m``. Each detection keeps its cluster's ``lag`` after the
+   frame's time (its points' mean firing time, ``ClusterTable.dt``) for the fits over the
+   track's detections. A ``dated`` tracker also measures the position then: p + lag v, with
    S = [1, lag] P [1, lag]^T + R, and the update uses that H (a fast drone moves metres within
    a scan; without it each detection's place in the scan reads as noise of the whole track);
+   an undated one (the estimator's default, ``frames.point_times`` 'fit') takes every cluster
+   at the frame's time, as a close drone's jittering centroid two detections 0.04 s apart
+   would otherwise read as speed;
 3. one-to-one assignment minimising the summed NIS (Hungarian, ``scipy``);
 4. unassigned clusters start new tracks (zero velocity, speed sigma ``init_speed_sigma``);
 5. a track not updated for ``max_miss_s`` ends;
@@ -331,8 +335,11 @@ class _Hits:
 class CandidateTracker:
     """Feed ``step`` frame by frame, then ``records`` gives every candidate track."""
 
-    def __init__(self, cfg: TrackingConfig) -> None:
+    def __init__(self, cfg: TrackingConfig, dated: bool = True) -> None:
+        """``dated``: the filter measures each cluster at its lag (``ClusterTable.dt``);
+        otherwise at the frame's time, the lags only recorded with the detections."""
         self.cfg = cfg
+        self.dated = dated
         self._x = np.zeros((0, 3, 2))  # states of active tracks
         self._P = np.zeros((0, 2, 2))
         self._last_t = np.zeros(0)  # last update time, s
@@ -377,7 +384,8 @@ class CandidateTracker:
         self._t = t_s
         k = len(table)
         z = table.centroid
-        lag = table.lags()  # each cluster seen this long after t_s: measures p + lag * v
+        seen = table.lags()  # each cluster seen this long after t_s, recorded with it
+        lag = seen if self.dated else np.zeros_like(seen)  # the filter measures p + lag * v
         r2 = cfg.meas_sigma_m**2
         assigned = np.zeros(k, dtype=bool)
         n_tr = len(self._ids)
@@ -423,7 +431,7 @@ class CandidateTracker:
                             float(nis[i, j]),
                             float(speeds[a]),
                             float(table.extent[j]),
-                            float(lag[j]),
+                            float(seen[j]),
                         )
                         if cfg.raw_gate_m > 0:  # (the raw gate off: nothing reads the verdict)
                             self._judge_raw(int(self._ids[i]))
@@ -457,7 +465,7 @@ class CandidateTracker:
                     float("nan"),
                     0.0,
                     float(table.extent[j]),
-                    float(lag[j]),
+                    float(seen[j]),
                 )
                 self._hits[int(tid)] = hits
                 if cfg.raw_min_cluster_hits <= 1:

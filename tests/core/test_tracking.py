@@ -407,7 +407,8 @@ def test_a_fast_drone_dated_inside_the_scan_is_tracked_with_the_right_speed() ->
     (where in the scan it was hit decides where it was): with the lags known
     (``ClusterTable.dt``) one track follows it all the way, at the right speed, with consistent
     innovations; dated at the frame's time instead, each detection is off by up to 1 m along
-    the path, and the track breaks up."""
+    the path, and the track breaks up. An undated tracker (``dated=False``) keeps the lags with
+    its detections, for the fits over them, and tracks as if they were unknown."""
     rng = np.random.default_rng(4)
     cfg = TrackingConfig()
     v = np.array([20.0, 0.0, 0.0])
@@ -415,8 +416,8 @@ def test_a_fast_drone_dated_inside_the_scan_is_tracked_with_the_right_speed() ->
     lags = rng.uniform(-0.05, 0.05, n)
     noise = rng.normal(0, 0.03, (n, 3))
 
-    def records(known: bool) -> list[TrackRecord]:
-        tracker = CandidateTracker(cfg)
+    def records(known: bool, dated: bool = True) -> list[TrackRecord]:
+        tracker = CandidateTracker(cfg, dated=dated)
         for k in range(n):
             t = 0.1 * k
             at = np.array([-40.0, 15.0, 8.0]) + v * (t + lags[k]) + noise[k]
@@ -433,6 +434,12 @@ def test_a_fast_drone_dated_inside_the_scan_is_tracked_with_the_right_speed() ->
     assert np.nanmedian(rec.nis[5:]) < 3.0  # chi^2, 3 dof: a consistent filter's median is 2.4
     blind = records(known=False)
     assert len(blind) > 1 and max(len(r.frames) for r in blind) < n / 2
+    undated = records(known=True, dated=False)
+    assert [r.frames.tolist() for r in undated] == [r.frames.tolist() for r in blind]
+    for r, b in zip(undated, blind, strict=True):
+        np.testing.assert_array_equal(r.positions, b.positions)
+        np.testing.assert_array_equal(r.speed, b.speed)
+        assert r.dt is not None and np.allclose(r.dt, lags[r.frames])
 
 
 def test_windowed_velocity_is_the_fit_of_each_detections_recent_past() -> None:
