@@ -14,9 +14,10 @@ whole-sequence evidence. Per frame:
    track's detections. A ``dated`` tracker also measures the position then: p + lag v, with
    S = [1, lag] P [1, lag]^T + R, and the update uses that H (a fast drone moves metres within
    a scan; without it each detection's place in the scan reads as noise of the whole track);
-   an undated one (the estimator's default, ``frames.point_times`` 'fit') takes every cluster
-   at the frame's time, as a close drone's jittering centroid two detections 0.04 s apart
-   would otherwise read as speed;
+   an undated one (the estimator's default, ``frames.point_times`` 'fit') associates and
+   filters every cluster at the frame's time, as a close drone's jittering centroid two
+   detections 0.04 s apart would otherwise read as speed, and keeps a second state per track
+   for output (``active``, what the causal estimate reports) that measures each at its lag;
 3. one-to-one assignment minimising the summed NIS (Hungarian, ``scipy``);
 4. unassigned clusters start new tracks (zero velocity, speed sigma ``init_speed_sigma``);
 5. a track not updated for ``max_miss_s`` ends;
@@ -342,6 +343,9 @@ class CandidateTracker:
         self.dated = dated
         self._x = np.zeros((0, 3, 2))  # states of active tracks
         self._P = np.zeros((0, 2, 2))
+        # undated: the same tracks' states with each detection measured at its lag, for output
+        self._xo = np.zeros((0, 3, 2))
+        self._Po = np.zeros((0, 2, 2))
         self._last_t = np.zeros(0)  # last update time, s
         self._raw_ok: set[int] = set()  # ids of the tracks the raw gate may continue
         self._ids = np.zeros(0, dtype=np.int64)
@@ -373,6 +377,9 @@ class CandidateTracker:
             Q = process_noise(dt, cfg.accel_psd)
             self._x = self._x @ F.T
             self._P = F @ self._P @ F.T + Q
+            if not self.dated:
+                self._xo = self._xo @ F.T
+                self._Po = F @ self._Po @ F.T + Q
             keep = t_s - self._last_t <= cfg.max_miss_s
             if not keep.all():
                 ended = self._ids[~keep].tolist()
@@ -380,6 +387,8 @@ class CandidateTracker:
                 for tid in ended:
                     self._end(tid)
                 self._x, self._P = self._x[keep], self._P[keep]
+                if not self.dated:
+                    self._xo, self._Po = self._xo[keep], self._Po[keep]
                 self._last_t, self._ids = self._last_t[keep], self._ids[keep]
         self._t = t_s
         k = len(table)
@@ -420,6 +429,8 @@ class CandidateTracker:
                     gain = hp / s_a[:, None]  # (A,2): P H^T / S
                     self._x[rows] += nu[:, :, None] * gain[:, None, :]
                     self._P[rows] -= gain[:, :, None] * hp[:, None, :]
+                    if not self.dated:
+                        self._dated_update(rows, z[cols], seen[cols], r2)
                     self._last_t[rows] = t_s
                     speeds = np.linalg.norm(self._x[rows, :, 1], axis=1)
                     for a, (i, j) in enumerate(zip(rows, cols, strict=True)):
@@ -472,6 +483,9 @@ class CandidateTracker:
                     self._judge_raw(int(tid))
             self._x = np.concatenate([self._x, x])
             self._P = np.concatenate([self._P, P])
+            if not self.dated:
+                self._xo = np.concatenate([self._xo, x])
+                self._Po = np.concatenate([self._Po, P])
             self._last_t = np.concatenate([self._last_t, np.full(m, t_s)])
             self._ids = np.concatenate([self._ids, ids])
             owner[new] = ids
@@ -524,6 +538,10 @@ class CandidateTracker:
                 gain = self._P[i, :, 0] / s
                 self._x[i] += nu[:, None] * gain[None, :]
                 self._P[i] -= np.outer(gain, self._P[i, 0, :])
+                if not self.dated:
+                    self._dated_update(
+                        np.array([i]), zr[None, :], np.zeros(1), cfg.raw_meas_sigma_m**2
+                    )
                 self._last_t[i] = t_s
                 hits.add(frame_index, -1, zr, n_in, nis, float(np.linalg.norm(self._x[i, :, 1])))
                 break
@@ -556,13 +574,33 @@ class CandidateTracker:
         ids.flags.writeable = False
         return ids
 
+    def _dated_update(
+        self,
+        rows: NDArray[np.intp],
+        z: NDArray[np.float64],
+        lag: NDArray[np.float64],
+        r2: float,
+    ) -> None:
+        """An undated tracker's output states of tracks ``rows`` updated with detections ``z``
+        (A,3) measured ``lag`` (A,) after the frame's time: H = [1, lag]."""
+        x, P = self._xo[rows], self._Po[rows]
+        nu = z - (x[:, :, 0] + lag[:, None] * x[:, :, 1])
+        hp = P[:, 0, :] + lag[:, None] * P[:, 1, :]
+        s = hp[:, 0] + lag * hp[:, 1] + r2
+        gain = hp / s[:, None]
+        self._xo[rows] = x + nu[:, :, None] * gain[:, None, :]
+        self._Po[rows] = P - gain[:, :, None] * hp[:, None, :]
+
     def active(self) -> ActiveTracks:
-        """The active tracks' filtered states at the last ``step``."""
+        """The active tracks' filtered states at the last ``step``: for an undated tracker,
+        those of its output filter, which measures each detection at its lag (the association
+        takes them at the frame's time)."""
+        x, P = (self._x, self._P) if self.dated else (self._xo, self._Po)
         return ActiveTracks(
             ids=self._ids.copy(),
-            position=self._x[:, :, 0].copy(),
-            velocity=self._x[:, :, 1].copy(),
-            pos_var=self._P[:, 0, 0].copy(),
+            position=x[:, :, 0].copy(),
+            velocity=x[:, :, 1].copy(),
+            pos_var=P[:, 0, 0].copy(),
         )
 
     def small_predictions(self, t_s: float) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
