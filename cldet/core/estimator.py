@@ -28,8 +28,9 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    the frame's time (the stamp plus ``frames.scan_offset_s``, the middle of the scan); each
    detection keeps when its points were taken, their mean firing time where the clouds record
    it (``fuse_timed``), and the fits over a track's detections (the line search, the
-   refinement's smoother and straight runs) measure it there (``frames.point_times``: 'fit';
-   'track' dates it in the tracker's filter too, 'off' nowhere); a confirmed moving track that gets no cluster continues on the raw points near its
+   refinement's smoother and straight runs, and the tracker's output state) measure it there
+   (``frames.point_times``: 'fit'; 'track' dates it in the tracker's filter too, 'off'
+   nowhere); a confirmed moving track that gets no cluster continues on the raw points near its
    prediction; the points of confirmed small moving tracks are withheld from the background
    (``background.protect_tracks``), so a drone that stops to hover is not learned: once their
    half-second mean lies ``background.protect_min_moved_m`` from its first value, or while
