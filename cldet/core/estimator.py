@@ -483,7 +483,9 @@ def _cluster_lags(
     lab = labels[ok]
     n = np.bincount(lab, minlength=k)[:k]
     total = np.bincount(lab, weights=times[ok].astype(np.float64), minlength=k)[:k]
-    return total / np.maximum(n, 1) - offset_s
+    # the times are float32: measured from the offset as float32 too, the points of a cloud
+    # without recorded times (all dated at the offset) give lags of exactly 0
+    return total / np.maximum(n, 1) - float(np.float32(offset_s))
 
 
 class TrackEstimator:
