@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import replace
 
 import numpy as np
@@ -402,6 +403,31 @@ def test_the_chain_drops_a_head_of_lone_returns_but_not_a_far_drone_approaching(
     assert chain_start(passing) == (0, 0)
 
 
+def _lagged_crossing(
+    speed: float, start: tuple[float, float, float], n: int = 40
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A drone crossing along x at ``speed`` m/s from ``start``, seen once a scan (10 Hz) at a
+    random instant of the 100 ms scan: per scan, that instant's lag after the frame's time, the
+    position seen then (3 cm noise) and the position at the frame's time."""
+    rng = np.random.default_rng(4)
+    lags = rng.uniform(-0.05, 0.05, n)
+    noise = rng.normal(0, 0.03, (n, 3))
+    t = 0.1 * np.arange(n)
+    path = np.asarray(start) + speed * np.outer(t, [1.0, 0.0, 0.0])
+    return lags, path + speed * np.outer(lags, [1.0, 0.0, 0.0]) + noise, path
+
+
+def _step_crossing(
+    tracker: CandidateTracker, lags: np.ndarray, seen: np.ndarray, known: bool
+) -> Iterator[int]:
+    """Feed ``tracker`` the crossing's detections, with their lags where ``known``; yields each
+    scan's index after its step."""
+    for k, at in enumerate(seen):
+        table = replace(_table([(at, 0.3, 3)]), dt=np.array([lags[k]]) if known else None)
+        tracker.step(k, 0.1 * k, table)
+        yield k
+
+
 def test_a_fast_drone_dated_inside_the_scan_is_tracked_with_the_right_speed() -> None:
     """A drone crossing at 20 m/s, seen once a scan at a random instant of the 100 ms scan
     (where in the scan it was hit decides where it was): with the lags known
@@ -409,20 +435,14 @@ def test_a_fast_drone_dated_inside_the_scan_is_tracked_with_the_right_speed() ->
     innovations; dated at the frame's time instead, each detection is off by up to 1 m along
     the path, and the track breaks up. An undated tracker (``dated=False``) keeps the lags with
     its detections, for the fits over them, and tracks as if they were unknown."""
-    rng = np.random.default_rng(4)
     cfg = TrackingConfig()
-    v = np.array([20.0, 0.0, 0.0])
-    n = 40
-    lags = rng.uniform(-0.05, 0.05, n)
-    noise = rng.normal(0, 0.03, (n, 3))
+    lags, seen, _ = _lagged_crossing(20.0, (-40.0, 15.0, 8.0))
+    n = len(lags)
 
     def records(known: bool, dated: bool = True) -> list[TrackRecord]:
         tracker = CandidateTracker(cfg, dated=dated)
-        for k in range(n):
-            t = 0.1 * k
-            at = np.array([-40.0, 15.0, 8.0]) + v * (t + lags[k]) + noise[k]
-            table = replace(_table([(at, 0.3, 3)]), dt=np.array([lags[k]]) if known else None)
-            tracker.step(k, t, table)
+        for _ in _step_crossing(tracker, lags, seen, known):
+            pass
         return tracker.records()
 
     # a track is born at rest (its speed unknown, 5 m/s sigma): at 20 m/s the first two births
@@ -448,25 +468,15 @@ def test_an_undated_trackers_output_state_measures_each_detection_at_its_lag() -
     drone crossing at 8 m/s, seen once a scan at a random instant of it: one track all along
     either way, and the output state at each frame's time about 4 cm from the drone, against
     15 cm with the lags unknown (up to 0.4 m along the path for each detection)."""
-    rng = np.random.default_rng(4)
-    cfg = TrackingConfig()
-    v = np.array([8.0, 0.0, 0.0])
-    n = 40
-    lags = rng.uniform(-0.05, 0.05, n)
-    noise = rng.normal(0, 0.03, (n, 3))
+    lags, seen, path = _lagged_crossing(8.0, (-15.0, 15.0, 8.0))
 
     def output_rms(known: bool) -> float:
-        tracker = CandidateTracker(cfg, dated=False)
+        tracker = CandidateTracker(TrackingConfig(), dated=False)
         errors = []
-        for k in range(n):
-            t = 0.1 * k
-            at = np.array([-15.0, 15.0, 8.0]) + v * (t + lags[k]) + noise[k]
-            tracker.step(
-                k, t, replace(_table([(at, 0.3, 3)]), dt=np.array([lags[k]]) if known else None)
-            )
+        for k in _step_crossing(tracker, lags, seen, known):
             (position,) = tracker.active().position
-            errors.append(np.linalg.norm(position - (np.array([-15.0, 15.0, 8.0]) + v * t)))
-        assert [len(r.frames) for r in tracker.records()] == [n]
+            errors.append(np.linalg.norm(position - path[k]))
+        assert [len(r.frames) for r in tracker.records()] == [len(lags)]
         return float(np.sqrt(np.mean(np.square(errors[5:]))))
 
     assert output_rms(known=True) < 0.06 and output_rms(known=False) > 0.1
