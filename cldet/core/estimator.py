@@ -505,8 +505,9 @@ class TrackEstimator:
             if sensor.ground_from_pose
             else None,
         )
-        dated = config.frames.point_times == "track"
-        self._tracker = CandidateTracker(config.tracking, dated=dated)
+        self._tracker = CandidateTracker(
+            config.tracking, dated=config.frames.point_times == "track"
+        )
         self._stamps: list[int] = []
         self._tables: list[ClusterTable] = []
         self._times = np.zeros(1024)  # observation time of each frame, s from the first stamp
@@ -675,7 +676,7 @@ class TrackEstimator:
             return
         cfg = self.config
         n_back = max(cfg.background.seen_through_bins, 1)
-        tracker = CandidateTracker(cfg.tracking, dated=cfg.frames.point_times == "track")
+        tracker = CandidateTracker(cfg.tracking, dated=self._tracker.dated)
         added: list[int] = []
         for index, h in enumerate(head):
             t_s = float(self._times[index])

@@ -423,14 +423,9 @@ class CandidateTracker:
                 good = ok[rows, cols]
                 rows, cols = rows[good], cols[good]
                 if len(rows):
-                    nu = diff[rows, cols]  # (A,3)
-                    s_a = s[rows, cols]
-                    hp = self._P[rows, 0, :] + lag[cols][:, None] * self._P[rows, 1, :]  # H P
-                    gain = hp / s_a[:, None]  # (A,2): P H^T / S
-                    self._x[rows] += nu[:, :, None] * gain[:, None, :]
-                    self._P[rows] -= gain[:, :, None] * hp[:, None, :]
+                    _lagged_update(self._x, self._P, rows, z[cols], lag[cols], r2)
                     if not self.dated:
-                        self._dated_update(rows, z[cols], seen[cols], r2)
+                        _lagged_update(self._xo, self._Po, rows, z[cols], seen[cols], r2)
                     self._last_t[rows] = t_s
                     speeds = np.linalg.norm(self._x[rows, :, 1], axis=1)
                     for a, (i, j) in enumerate(zip(rows, cols, strict=True)):
@@ -539,8 +534,9 @@ class CandidateTracker:
                 self._x[i] += nu[:, None] * gain[None, :]
                 self._P[i] -= np.outer(gain, self._P[i, 0, :])
                 if not self.dated:
-                    self._dated_update(
-                        np.array([i]), zr[None, :], np.zeros(1), cfg.raw_meas_sigma_m**2
+                    r2_raw = cfg.raw_meas_sigma_m**2
+                    _lagged_update(
+                        self._xo, self._Po, np.array([i]), zr[None, :], np.zeros(1), r2_raw
                     )
                 self._last_t[i] = t_s
                 hits.add(frame_index, -1, zr, n_in, nis, float(np.linalg.norm(self._x[i, :, 1])))
@@ -573,23 +569,6 @@ class CandidateTracker:
         ids = self._ids.view()
         ids.flags.writeable = False
         return ids
-
-    def _dated_update(
-        self,
-        rows: NDArray[np.intp],
-        z: NDArray[np.float64],
-        lag: NDArray[np.float64],
-        r2: float,
-    ) -> None:
-        """An undated tracker's output states of tracks ``rows`` updated with detections ``z``
-        (A,3) measured ``lag`` (A,) after the frame's time: H = [1, lag]."""
-        x, P = self._xo[rows], self._Po[rows]
-        nu = z - (x[:, :, 0] + lag[:, None] * x[:, :, 1])
-        hp = P[:, 0, :] + lag[:, None] * P[:, 1, :]
-        s = hp[:, 0] + lag * hp[:, 1] + r2
-        gain = hp / s[:, None]
-        self._xo[rows] = x + nu[:, :, None] * gain[:, None, :]
-        self._Po[rows] = P - gain[:, :, None] * hp[:, None, :]
 
     def active(self) -> ActiveTracks:
         """The active tracks' filtered states at the last ``step``: for an undated tracker,
@@ -676,6 +655,27 @@ class CandidateTracker:
             _to_record(tid, h) for tid, h in self._hits.items() if len(h.frames) >= MIN_TRACK_HITS
         ]
         return sorted(self._ended + live, key=lambda r: r.track_id)
+
+
+def _lagged_update(
+    x: NDArray[np.float64],
+    P: NDArray[np.float64],
+    rows: NDArray[np.intp],
+    z: NDArray[np.float64],
+    lag: NDArray[np.float64],
+    r2: float,
+) -> None:
+    """In place: the states ``x`` (T,3,2) and covariances ``P`` (T,2,2) of tracks ``rows`` (A,)
+    updated with detections ``z`` (A,3) measured ``lag`` (A,) after the states' time, each with
+    variance ``r2``: H = [1, lag], S = P00 + 2 lag P01 + lag^2 P11 + R (the association's own
+    S, term for term)."""
+    xa, Pa = x[rows], P[rows]
+    nu = z - (xa[:, :, 0] + lag[:, None] * xa[:, :, 1])  # (A,3)
+    s = Pa[:, 0, 0] + lag * (2.0 * Pa[:, 0, 1] + lag * Pa[:, 1, 1]) + r2
+    hp = Pa[:, 0, :] + lag[:, None] * Pa[:, 1, :]  # H P
+    gain = hp / s[:, None]  # (A,2): P H^T / S
+    x[rows] += nu[:, :, None] * gain[:, None, :]
+    P[rows] -= gain[:, :, None] * hp[:, None, :]
 
 
 def _to_record(tid: int, h: _Hits) -> TrackRecord:
