@@ -7,7 +7,7 @@ them, Livox's ``CustomMsg`` included.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -72,6 +72,7 @@ def point_cloud2(
     *,
     xyz: str = "f4",
     extra: Iterable[tuple[str, str]] = (),
+    values: Mapping[str, np.ndarray] | None = None,
     big_endian: bool = False,
     lead: int = 0,
     point_step: int | None = None,
@@ -81,7 +82,8 @@ def point_cloud2(
     """A PointCloud2 (as a dict for mcap-ros2-support) of (N, 3) points.
 
     ``lead`` bytes of padding come before x, y, z (which are ``xyz`` typed), then the ``extra``
-    (name, numpy type) fields filled with 7s; ``drop`` names a field left out of the list.
+    (name, numpy type) fields, holding ``values[name]`` (7s where ``values`` has no such name);
+    ``drop`` names a field left out of the list.
     """
     order = ">" if big_endian else "<"
     names = ["x", "y", "z", *(n for n, _ in extra)]
@@ -102,7 +104,7 @@ def point_cloud2(
     for i, axis in enumerate("xyz"):
         records[axis] = points[:, i]
     for name, _ in extra:
-        records[name] = 7
+        records[name] = (values or {}).get(name, 7)
     fields = [
         {"name": n, "offset": o, "datatype": FIELD_TYPES[k], "count": 1}
         for n, o, k in zip(names, offsets, kinds, strict=True)

@@ -84,19 +84,26 @@ def _radar(typestore, stamp_ns: int, points: np.ndarray):  # type: ignore[no-unt
     )
 
 
-def _pc2(typestore, stamp_ns: int, points: np.ndarray):  # type: ignore[no-untyped-def]
+def _pc2(typestore, stamp_ns: int, points: np.ndarray, times: np.ndarray):  # type: ignore[no-untyped-def]
+    """x, y, z float32 and Ouster's ``t``: uint32 nanoseconds after the stamp."""
     types = typestore.types
     field = types["sensor_msgs/msg/PointField"]
-    data = np.ascontiguousarray(points, "<f4")
+    records = np.zeros(len(points), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("t", "<u4")])
+    for i, axis in enumerate("xyz"):
+        records[axis] = points[:, i]
+    records["t"] = np.round(times.astype(np.float64) * 1e9)
     return types["sensor_msgs/msg/PointCloud2"](
         header=_header(typestore, stamp_ns, "livox_frame"),
         height=1,
         width=len(points),
-        fields=[field(name=c, offset=4 * i, datatype=7, count=1) for i, c in enumerate("xyz")],
+        fields=[
+            field(name=c, offset=4 * i, datatype=7 if c != "t" else 6, count=1)
+            for i, c in enumerate("xyzt")
+        ],
         is_bigendian=False,
-        point_step=12,
-        row_step=12 * len(points),
-        data=data.reshape(-1).view(np.uint8),
+        point_step=16,
+        row_step=16 * len(points),
+        data=records.view(np.uint8),
         is_dense=True,
     )
 
@@ -186,7 +193,8 @@ def test_a_ros2_bag_folder_converts_to_the_same_log(
         }
         for stamp, modality, item in _stamped(sequence):
             if modality == "lidar_360":
-                message, kind = _pc2(typestore, stamp, item.points), "sensor_msgs/msg/PointCloud2"  # type: ignore[attr-defined]
+                message = _pc2(typestore, stamp, item.points, item.times)  # type: ignore[attr-defined]
+                kind = "sensor_msgs/msg/PointCloud2"
             elif modality == "ground_truth":
                 message, kind = (
                     _point_stamped(typestore, stamp, item.position),
@@ -203,6 +211,9 @@ def test_a_ros2_bag_folder_converts_to_the_same_log(
     got = list(iter_clouds(log, topics.LIDAR_360))
     assert [c.stamp_ns for c in got] == [c.stamp_ns for c in expected]
     np.testing.assert_array_equal(got[5].points, expected[5].points)
+    # each point's firing time, from the PointCloud2's t field into the log's time field
+    assert got[5].times is not None and expected[5].times is not None
+    np.testing.assert_allclose(got[5].times, expected[5].times, atol=1e-9)
 
 
 def test_a_bag_without_the_point_cloud_topic_is_a_clear_error(tmp_path: Path) -> None:

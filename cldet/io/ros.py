@@ -6,9 +6,19 @@ stamp is integer nanoseconds from the message's own header (a Livox ``CustomMsg`
 ``timebase``), never the time a recorder received it.
 
 Supported point clouds: ``sensor_msgs/msg/PointCloud2`` (x, y, z float32 or float64 at any
-offset, either byte order; other fields ignored), ``livox_ros_driver2/msg/CustomMsg`` and
-``livox_ros_driver/msg/CustomMsg``, ``sensor_msgs/msg/PointCloud`` (radar). Non-finite points
-are dropped. Positions: ``geometry_msgs/msg/PointStamped`` and ``PoseStamped``. Transforms:
+offset, either byte order; a per-point time field as below; other fields ignored),
+``livox_ros_driver2/msg/CustomMsg`` and ``livox_ros_driver/msg/CustomMsg`` (``offset_time``),
+``sensor_msgs/msg/PointCloud`` (radar). Non-finite points are dropped.
+
+A PointCloud2's points are dated by the first of the fields ``offset_time``, ``t``, ``time``
+and ``timestamp`` it has (one number a point). The drivers disagree on what it holds, so its
+type and size tell: integers are nanoseconds after the header stamp (Ouster's ``t``, Livox's
+``offset_time``), floats seconds after it (Velodyne's ``time``), but floats from 1e8 up are
+times since the epoch, in whichever of seconds (Hesai's and RoboSense's ``timestamp``),
+milliseconds, microseconds or nanoseconds (livox_ros_driver2's ``timestamp``) puts the
+first point nearest the stamp. Times that are not finite, or lie more than ``MAX_SCAN_S`` from the stamp, are
+not used: the cloud is then read as one without times (every point at the configured
+``frames.scan_offset_s``). Positions: ``geometry_msgs/msg/PointStamped`` and ``PoseStamped``. Transforms:
 ``tf2_msgs/msg/TFMessage`` (``/tf_static``).
 """
 
@@ -37,6 +47,8 @@ from cldet.stamps import NS_PER_S
 
 __all__ = [
     "CLOUD_TYPES",
+    "MAX_SCAN_S",
+    "POINT_TIME_FIELDS",
     "POSITION_TYPES",
     "TF_MESSAGE",
     "TF_STATIC",
@@ -178,10 +190,30 @@ def _finite_timed(
 
 
 _NS = 1e-9  # a Livox point's offset_time is in nanoseconds after the message's timebase
+# a PointCloud2's per-point time fields, in the order they are looked for (module docstring)
+POINT_TIME_FIELDS: Final = ("offset_time", "t", "time", "timestamp")
+MAX_SCAN_S: Final = 1.0  # point times farther from the stamp than this are not a scan's
 
 
-def _point_cloud2_xyz(msg: Any) -> NDArray[np.float32]:
-    """x, y, z of a ``sensor_msgs/PointCloud2``, (N, 3) float32; ValueError says what is wrong."""
+def _seconds_after(values: NDArray[Any], stamp_ns: int) -> NDArray[np.float32] | None:
+    """A PointCloud2 time field's ``values`` as seconds after ``stamp_ns`` (module docstring);
+    None where they are not finite or not within ``MAX_SCAN_S`` of it."""
+    seconds = values.astype(np.float64)
+    if values.dtype.kind in "iu":  # nanoseconds after the stamp (PointField has no 64-bit int)
+        seconds *= _NS
+    elif len(values) and np.isfinite(values).all():
+        first = float(seconds[0])
+        if abs(first) >= 1e8:  # since the epoch, in the unit that puts it nearest the stamp
+            ns_per_unit = min((1e9, 1e6, 1e3, 1.0), key=lambda u: abs(first * u - stamp_ns))
+            seconds = (seconds * ns_per_unit - stamp_ns) * _NS
+    if not (np.abs(seconds) <= MAX_SCAN_S).all():  # NaN too
+        return None
+    return seconds.astype(np.float32)
+
+
+def _point_cloud2(msg: Any) -> tuple[NDArray[np.float32], NDArray[np.float32] | None]:
+    """The finite points of a ``sensor_msgs/PointCloud2``, (N, 3) float32, and their times after
+    the header stamp (None: no usable time field); ValueError says what is wrong."""
     fields = {f.name: f for f in msg.fields}
     listing = ", ".join(
         f"{f.name} ({_POINT_FIELD_TYPES.get(f.datatype, f.datatype)})" for f in msg.fields
@@ -215,8 +247,9 @@ def _point_cloud2_xyz(msg: Any) -> NDArray[np.float32]:
             f"of {step} bytes (expected {needed})"
         )
     if not needed:
-        return np.zeros((0, 3), np.float32)
+        return np.zeros((0, 3), np.float32), None
     order = ">" if msg.is_bigendian else "<"
+    times = _point_cloud2_times(msg, fields, data, order)
     packed = [int(fields[a].offset) for a in "xyz"] == [0, 4, 8]
     if (
         packed
@@ -228,7 +261,7 @@ def _point_cloud2_xyz(msg: Any) -> NDArray[np.float32]:
         flat = np.frombuffer(data, dtype="<f4", count=height * width * step // 4)
         xyz = flat.reshape(height * width, step // 4)[:, :3]
         # every float of the buffer finite (one contiguous pass): so are x, y, z
-        return xyz if np.isfinite(flat).all() else _finite(xyz)
+        return (xyz, times) if np.isfinite(flat).all() else _finite_timed(xyz, times)
     dtype = np.dtype(
         {
             "names": ["x", "y", "z"],
@@ -241,7 +274,36 @@ def _point_cloud2_xyz(msg: Any) -> NDArray[np.float32]:
     points = np.empty((height * width, 3), np.float32)
     for i, axis in enumerate("xyz"):
         points[:, i] = grid[axis].reshape(-1)
-    return _finite(points)
+    return _finite_timed(points, times)
+
+
+def _point_cloud2_times(
+    msg: Any, fields: dict[str, Any], data: NDArray[np.uint8], order: str
+) -> NDArray[np.float32] | None:
+    """(N,) seconds after the header stamp of a PointCloud2's first time field (module
+    docstring), every point's, finite or not; None without a usable one."""
+    name = next((n for n in POINT_TIME_FIELDS if n in fields), None)
+    if name is None:
+        return None
+    field = fields[name]
+    kind = _POINT_FIELD_TYPES.get(field.datatype)
+    if kind is None or int(field.count) > 1:
+        return None
+    dtype = np.dtype(
+        {
+            "names": ["t"],
+            "formats": [order + kind],
+            "offsets": [int(field.offset)],
+            "itemsize": int(msg.point_step),
+        }
+    )
+    values = np.ndarray(
+        (int(msg.height), int(msg.width)),
+        dtype=dtype,
+        buffer=data,
+        strides=(int(msg.row_step), int(msg.point_step)),
+    )["t"].reshape(-1)
+    return _seconds_after(values, header_stamp_ns(msg.header))
 
 
 def _point_list_xyz(points: Iterable[Any]) -> NDArray[np.float32]:
@@ -256,11 +318,12 @@ def ros_cloud(msg: Any, typename: str) -> StampedCloud:
     Raises:
         ValueError: the type is not a supported point cloud, or the message is malformed (a
             PointCloud2 without x, y, z, a point_step smaller than its fields, truncated data).
+            A PointCloud2 time field that is not usable is not an error (module docstring).
     """
     typename = normalize_type(typename)
     times = None
     if typename == POINT_CLOUD2:
-        points = _point_cloud2_xyz(msg)
+        points, times = _point_cloud2(msg)
         stamp = header_stamp_ns(msg.header)
     elif typename in LIVOX_CUSTOM:
         offsets = np.array([p.offset_time for p in msg.points], dtype=np.float64) * _NS
