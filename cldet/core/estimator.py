@@ -473,6 +473,15 @@ def fuse_timed(
     return np.concatenate([mid, avia]), len(mid), np.concatenate([t_mid, t_avia])
 
 
+def seen_times(t_s: NDArray[np.float64], lags: NDArray[np.float64]) -> NDArray[np.float64]:
+    """When each detection was seen: its frame's observation time ``t_s`` plus its ``lags``
+    (its points' mean time in the scan; 0 where undated), kept in order where an Avia
+    detection's lag overtakes the next frame's. What every fit over a track's detections uses
+    (``frames.point_times``): the refinement's smoother and straight runs, and the causal
+    estimate's straight coasts and lines, the same fits from the past alone."""
+    return np.maximum.accumulate(t_s + lags)
+
+
 def _cluster_lags(
     labels: NDArray[np.integer], times: NDArray[np.float32], k: int, offset_s: float
 ) -> NDArray[np.float64]:
@@ -1181,7 +1190,7 @@ class TrackEstimator:
             run = None
             rec = self._tracker.record(track_id)
             if rec is not None and len(rec.frames):
-                t = self._times[rec.frames]
+                t = seen_times(self._times[rec.frames], rec.lags())
                 p = rec.positions
                 origin, v, hold_s = _extrapolation_ends(
                     t, p, p[-1:], np.zeros((1, 3)), self._scan_s(index), self.config.smoothing
@@ -1224,7 +1233,7 @@ class TrackEstimator:
         if not recent:
             return
         line = max(recent, key=lambda tr: tr.score)
-        t, z = line.times_s, line.positions
+        t, z = seen_times(line.times_s, line.record.lags()), line.positions
         if self._coast is not None and self._coast.t_s >= t[-1]:
             return  # a lost track seen more recently already coasts
         p0, v, tm = constant_velocity_fit(t, z)
@@ -1358,9 +1367,8 @@ def refine_candidates(
     idx = np.flatnonzero(have)
     first, last = int(idx[0]), int(idx[-1])
     seg = slice(first, last + 1)
-    # when each detection was seen (its points' mean time; kept in order where an Avia
-    # detection's lag overtakes the next frame's); frames without one: their observation time
-    t_obs = np.maximum.accumulate(t_s + lag)
+    # when each detection was seen; frames without one: their observation time
+    t_obs = seen_times(t_s, lag)
     sm = rts_smooth(t_obs[seg], z[seg], sigma[seg], cfg.smoothing.accel_psd, tc.init_speed_sigma)
     pos = np.zeros((n, 3))
     var = np.zeros(n)

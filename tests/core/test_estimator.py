@@ -820,6 +820,49 @@ def test_a_fast_drone_hit_anywhere_in_the_scan_is_refined_at_its_points_time() -
     assert fit < 0.15 and fit < 0.5 * off  # about 0.11 against 0.34 m
 
 
+def test_a_lost_fast_pass_is_coasted_causally_at_its_points_time() -> None:
+    """A drone crossing at 20 m/s, 10 m out at its closest, hit each scan at an instant that
+    drifts from late in the scan to early over the 3 s it is seen (its direction moves through
+    the scan pattern), then out of reach for 3 s. Dated at the scan's middle, the detections
+    lie 0.8 m ahead at the start and 0.8 m behind at the end: the straight run's line through
+    them is 0.5 m/s slow. The causal estimate coasts along that line from the past alone, as the
+    refinement extrapolates, and with ``frames.point_times`` 'fit' both fit it at the points'
+    own times."""
+    from tests.core.scene import scan
+
+    rng = np.random.default_rng(3)
+    n, seen, empty = 60, 30, np.zeros((0, 3), np.float32)
+
+    def at(t: float) -> np.ndarray:
+        return np.array([10.0, -50.0 + 20.0 * t, 3.0])
+
+    frames = []
+    for k in range(n):
+        hit = 0.09 - 0.08 * k / (seen - 1)  # when in scan k the drone was hit
+        objects = [((*at(0.1 * k + hit),), 0.15)] if k < seen else []
+        pts = scan(rng, objects, n_rays=60000, wall=False)
+        times = rng.uniform(0.0, 0.1, len(pts)).astype(np.float32)
+        if k < seen:
+            times[np.linalg.norm(pts - at(0.1 * k + hit), axis=1) < 0.25] = hit
+        frames.append(LidarFrame(k * 100_000_000, pts, empty, mid360_times=times))
+
+    def end_errors(point_times: str) -> tuple[float, float]:
+        """The refined and the causal estimate's error at the last scan, 3 s after the last hit."""
+        cfg = load_config(overrides={"frames": {"point_times": point_times}})
+        _, result = estimate_sequence(frames, cfg)
+        assert sum(e.source == Source.DETECTED for e in result.estimates) >= 20
+        refined, causal = result.estimates[-1], result.causal[-1]
+        assert refined.source == causal.source == Source.PREDICTED
+        truth = at(0.1 * (n - 1))
+        return (
+            float(np.linalg.norm(refined.position - truth)),
+            float(np.linalg.norm(causal.position - truth)),
+        )
+
+    fit, off = end_errors("fit"), end_errors("off")
+    assert max(fit) < 0.5 * min(off)  # about 0.25 against 2.6 m
+
+
 def test_a_straight_pass_seen_only_midway_is_extrapolated_along_its_line() -> None:
     # a drone crossing at 15 m/s, 15-27 m out, returns points only in scans 25-55 of 80 (out
     # of range or hidden before and after); it flew straight while seen, so inertia carries it
