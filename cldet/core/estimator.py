@@ -406,10 +406,8 @@ class _Evidence:
 
     @property
     def lived(self) -> float:
-        """Seconds from the first detection to the last, to the microsecond: the frames' times
-        are float seconds, and ten 100 ms frame periods must make the full 1 s they are (a
-        track seen ten periods apart is not judged a period later than one seen eleven)."""
-        return round(self.last_t_s - self.first_t_s, 6)
+        """Seconds from the first detection to the last."""
+        return self.last_t_s - self.first_t_s
 
     def score(self, cfg: TrackingConfig, rigid: bool = False) -> float:
         """Running evidence; "static" and "fixed" (see ``cldet.core.selection``: here the box

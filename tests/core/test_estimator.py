@@ -1160,17 +1160,6 @@ def test_a_flight_displaces_the_running_mean_where_scatter_only_widens_its_box()
     assert flight.displaced > threshold
 
 
-def test_a_track_seen_ten_frame_periods_apart_has_lived_a_second() -> None:
-    # the frames' times are float seconds after the first stamp (plus the scan offset): for
-    # 11 of the first 80 frames, the frame ten periods later lies 0.9999999999999998 s on, and
-    # a track born there would wait a detection longer for the causal choice to judge it
-    for first in range(80):
-        ev = _Evidence()
-        for k in (first, first + 10):
-            ev.add(k * 100_000_000 / 1e9 + 0.05, 1.0, np.array([5.0, 0.0, 1.0]), False)
-        assert ev.lived == 1.0
-
-
 @pytest.mark.parametrize("n_points", [20, 1])
 def test_a_still_track_is_protected_as_a_hover_only_when_its_clusters_are_dense(
     n_points: int,
