@@ -16,9 +16,11 @@ type and size tell: integers are nanoseconds after the header stamp (Ouster's ``
 ``offset_time``), floats seconds after it (Velodyne's ``time``), but floats from 1e8 up are
 times since the epoch, in whichever of seconds (Hesai's and RoboSense's ``timestamp``),
 milliseconds, microseconds or nanoseconds (livox_ros_driver2's ``timestamp``) puts the
-first point nearest the stamp. Times that are not finite, or lie more than ``MAX_SCAN_S`` from the stamp, are
-not used: the cloud is then read as one without times (every point at the configured
-``frames.scan_offset_s``). Positions: ``geometry_msgs/msg/PointStamped`` and ``PoseStamped``. Transforms:
+first point nearest the stamp. Times that are not finite, or lie more than ``MAX_SCAN_S``
+from the stamp, are not used: the cloud is then read as one without times (every point at
+the configured ``frames.scan_offset_s``).
+
+Positions: ``geometry_msgs/msg/PointStamped`` and ``PoseStamped``. Transforms:
 ``tf2_msgs/msg/TFMessage`` (``/tf_static``).
 """
 
