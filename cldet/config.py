@@ -59,9 +59,9 @@ class FramesConfig(BaseModel):
         " moves 2 m in a scan, and a return dated at the scan's middle is off by up to 1 m along"
         " its path. 'fit': the fits over a track's detections use it (the line search, the"
         " refinement's smoother and straight runs, the causal estimate's coasts along a straight"
-        " run or a line, and the tracker's output state that the causal estimate reports), while the tracker's association and filter take each cluster at"
-        " the frame's time; 'track': the tracker too (H = [1, lag]), which"
-        " broke close drones on development worlds (a close drone's centroid jitters by"
+        " run or a line, and the tracker's output state that the causal estimate reports),"
+        " while the tracker's association and filter take each cluster at the frame's time;"
+        " 'track': the tracker too (H = [1, lag]), which broke close drones on development worlds (a close drone's centroid jitters by"
         " decimetres between detections the lags put 0.04 s apart, which a young track takes"
         " as speed); 'off' (or times not recorded): every point at scan_offset_s. true and"
         " false, the switch's former values, mean 'track' and 'off'",

@@ -91,26 +91,41 @@ def test_point_cloud2_layouts_read_at_the_header_stamp(
     assert len(got[1].points) == 48
 
 
-# each driver's per-point time: (field, type, its values for times after the stamp, seconds)
+# each driver's per-point time: (field, type, its values for times t after the stamp in
+# seconds, when its scans start after the stamp: Velodyne's ROS driver stamps a scan late, so
+# its first points come before the stamp)
 TIME_CONVENTIONS = {
-    "ouster t: ns after the stamp": ("t", "u4", lambda t, stamp: np.round(t * 1e9)),
-    "livox offset_time: ns after": ("offset_time", "u4", lambda t, stamp: np.round(t * 1e9)),
-    "velodyne time: s after (or before)": ("time", "f4", lambda t, stamp: t - 0.05),
-    "hesai timestamp: s since the epoch": ("timestamp", "f8", lambda t, stamp: stamp * 1e-9 + t),
+    "ouster t: ns after the stamp": ("t", "u4", lambda t, stamp: np.round(t * 1e9), 0.0),
+    "livox offset_time: ns after": (
+        "offset_time",
+        "u4",
+        lambda t, stamp: np.round(t * 1e9),
+        0.0,
+    ),
+    "velodyne time: s after (or before)": ("time", "f4", lambda t, stamp: t, -0.05),
+    "hesai timestamp: s since the epoch": (
+        "timestamp",
+        "f8",
+        lambda t, stamp: stamp * 1e-9 + t,
+        0.0,
+    ),
     "livox2 timestamp: ns since the epoch": (
         "timestamp",
         "f8",
         lambda t, stamp: stamp + np.round(t * 1e9),
+        0.0,
     ),
     "timestamp: ms since the epoch": (
         "timestamp",
         "f8",
         lambda t, stamp: stamp * 1e-6 + t * 1e3,
+        0.0,
     ),
     "timestamp: us since the epoch": (
         "timestamp",
         "f8",
         lambda t, stamp: stamp // 1000 + np.round(t * 1e6),
+        0.0,
     ),
 }
 
@@ -119,19 +134,18 @@ TIME_CONVENTIONS = {
 def test_point_cloud2_time_fields_give_each_point_its_time_after_the_stamp(
     tmp_path: Path, convention: str
 ) -> None:
-    name, kind, encode = TIME_CONVENTIONS[convention]
+    name, kind, encode, start_s = TIME_CONVENTIONS[convention]
     rng = np.random.default_rng(11)
     points = _points(rng, 40)
     points[[5, 9]] = np.nan  # dropped with their times
-    after = np.sort(rng.uniform(0.0, 0.1, len(points)))  # a 100 ms scan
-    expected = encode(after, T0) if kind != "f4" else after - 0.05
-    message = point_cloud2(T0, "lidar", points, extra=((name, kind),), values={name: expected})
+    after = start_s + np.sort(rng.uniform(0.0, 0.1, len(points)))  # a 100 ms scan
+    values = {name: encode(after, T0)}
+    message = point_cloud2(T0, "lidar", points, extra=((name, kind),), values=values)
     write_pc2_log(tmp_path / "timed.mcap", [("/points", T0, message)])
     (cloud,) = iter_log_clouds(tmp_path / "timed.mcap", "/points")
     keep = np.isfinite(points).all(axis=1)
     assert cloud.times is not None and cloud.times.dtype == np.float32
-    truth = after - 0.05 if kind == "f4" else after
-    np.testing.assert_allclose(cloud.times, truth[keep], atol=1e-6)  # float64 epoch ns: 256 ns
+    np.testing.assert_allclose(cloud.times, after[keep], atol=1e-6)  # float64 epoch ns: 256 ns
     np.testing.assert_array_equal(cloud.points, points[keep])
 
 
