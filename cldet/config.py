@@ -198,6 +198,15 @@ class BackgroundConfig(BaseModel):
         ge=0,
         description="static blobs this small floating in free space are not background (0: off)",
     )
+    floating_arrivals: bool = Field(
+        default=True,
+        description="... also a blob beside the bottom of the field of view, where its surface"
+        " arrived (the sensors had seen through that spot before) and lies clear of the ground:"
+        " a slow drone flying along the field's bottom (a high mount, a tilted sensor), learned"
+        " from its own trail; a hedge or the ground far out seen on the lowest row was there"
+        " before, or is the ground (false: such a blob never floats, as it may be the visible"
+        " end of something larger)",
+    )
     reclaim_m: float = Field(
         default=0.6,
         ge=0,

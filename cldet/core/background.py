@@ -53,7 +53,12 @@ ray. The model is a static range image, learned causally (only the past is used)
    is attached to its pole (range-continuous), so it stays part of the pole's blob. A blob
    beside a cell outside the field of view (never hit, below the lowest elevation the sensors
    see: ``field_bottom_deg``) does not float: no free space is known there, and the ground or
-   a hedge seen on the field's lowest row is the visible end of something larger.
+   a hedge seen on the field's lowest row is the visible end of something larger; unless
+   (``floating_arrivals``) its cells there arrived (``onsets``: the sensors had seen through
+   the spot before) and their lower edges lie above the ground by more than 0.5 m and a
+   cell's height at that range: those were
+   there before, or are the ground, while a slow drone flying along the field's bottom (a
+   mount high above the ground, a tilted sensor) learns its own trail, which recurs.
 5. Dilation: the static range is replaced by the minimum over the cell and its 8 neighbours
    (azimuth wraps), ``dilate_cells`` times: beam divergence at edges stays background.
 6. A point is background when its range is not shorter than the static range by more than
@@ -319,12 +324,18 @@ def _run_width(static: NDArray[np.float32], e: int, a: int) -> int:
 
 @numba.njit(cache=True)
 def _floating_blobs(
-    static: NDArray[np.float32], cell_deg: float, max_size: float, unknown: NDArray[np.bool_]
+    static: NDArray[np.float32],
+    cell_deg: float,
+    max_size: float,
+    unknown: NDArray[np.bool_],
+    arrived: NDArray[np.bool_],
 ) -> NDArray[np.bool_]:
     """Cells of small static blobs floating in free space (see the module docstring, step 4).
 
     ``unknown`` (n_el, n_az) marks cells outside the field of view: no free space is known
-    there, so a blob beside one may be the visible end of something larger.
+    there, so a blob beside one may be the visible end of something larger, unless the blob's
+    cell beside it is marked in ``arrived`` (its surface came where the sensors had seen
+    through, clear of the ground: nothing larger stood there).
     """
     n_el, n_az = static.shape
     comp = np.full((n_el, n_az), -1, dtype=np.int64)
@@ -414,6 +425,8 @@ def _floating_blobs(
                             continue
                         n_border += 1
                         if unknown[ee, aa]:
+                            if arrived[e, a]:
+                                continue  # it came there: not the end of something standing
                             ok = False
                             break
                         rn = static[ee, aa]
@@ -562,15 +575,24 @@ class BackgroundModel:
         in at least ``_ONSET_SEEN_THROUGH`` bins, or none in so many bins that a surface there,
         hit at its rate since, would have been hit (``1 - _ONSET_CONFIDENCE`` chance); else
         ``NO_ONSET`` (there as long as the window remembers, or never static)."""
-        cfg = self.cfg
-        b = min(self.n_bins, cfg.window_bins)
         out = np.full(len(self._static), NO_ONSET, dtype=np.int64)
         cells = np.flatnonzero(np.isfinite(self._static) & self._seen)  # a group's own column
+        out[cells] = self._onsets_at(cells, self._static[cells])[0]
+        return out
+
+    def _onsets_at(
+        self, cells: NDArray[np.int64], static: NDArray[np.float32]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """:meth:`onsets` of the ``cells`` (indices of cells ever hit) whose static ranges are
+        ``static`` (finite), and in how many bins from then on the surface was hit."""
+        cfg = self.cfg
+        b = min(self.n_bins, cfg.window_bins)
+        out = np.full(len(cells), NO_ONSET, dtype=np.int64)
         if b < 2 or not len(cells):
-            return out
+            return out, np.zeros(len(cells), dtype=np.int64)
         order = (np.arange(b) + (self.n_bins - b)) % cfg.window_bins  # oldest bin first
         ring = self._ring[cells][:, order]  # (C, b)
-        static = self._static[cells, None]
+        static = static[:, None]
         margin = _margins(static, cfg.margin_m, cfg.margin_fraction)
         near = np.abs(ring - static) <= margin
         far = np.isfinite(ring) & (ring > static + margin)
@@ -578,14 +600,53 @@ class BackgroundModel:
         before = np.arange(b)[None, :] < first[:, None]
         n_far = np.sum(far & before, axis=1)
         n_none = np.sum(~np.isfinite(ring) & before, axis=1)
-        rate = np.sum(near & ~before, axis=1) / (b - first)
+        hits = np.sum(near & ~before, axis=1)
+        rate = hits / (b - first)
         with np.errstate(divide="ignore"):
             missed = n_none * np.log1p(-np.minimum(rate, 0.999))  # log P(no hit in those bins)
         new = (first > 0) & (
             (n_far >= _ONSET_SEEN_THROUGH) | (missed <= np.log(1.0 - _ONSET_CONFIDENCE))
         )
-        out[cells[new]] = self._ring_end_ns[order][first[new]] - self._bin_ns
-        return out
+        out[new] = self._ring_end_ns[order][first[new]] - self._bin_ns
+        return out, hits
+
+    def _arrived(
+        self, static: NDArray[np.float32], unknown: NDArray[np.bool_]
+    ) -> NDArray[np.bool_]:
+        """(n_el, n_az) the static cells beside the unknown (``_unknown``) whose surface arrived
+        there (``onsets``: the sensors had seen through that spot before) and stayed (hit in
+        ``recurrent_bins`` bins since: not rain learned while the window holds a few bins), and
+        whose lower edge,
+        at the static range, lies above the ground by more than ``_GROUND_BAND_M`` and the
+        cell's height there (a fit of the ground seen at a grazing angle is that uncertain;
+        the ground is the lower of the plane and the height map: what a drone learned there
+        adds to the map does not count). Such a blob is no visible end of something standing on the ground, as the
+        hedge or the ground far out seen on the field's lowest row is: they were there before,
+        or are the ground; a slow drone flying along the bottom of the field of view, learned
+        from its own trail, is not (the floating rule, step 4, clears it)."""
+        out = np.zeros(unknown.size, dtype=np.bool_)
+        if not self.cfg.floating_arrivals or not unknown.any() or not self.ground.fitted:
+            return out.reshape(unknown.shape)
+        beside = box_minimum(np.where(unknown, 0.0, 1.0).astype(np.float32), 3, True) == 0.0
+        flat = static.ravel()
+        cells = np.flatnonzero(beside.ravel() & ~unknown.ravel() & np.isfinite(flat) & self._seen)
+        if not len(cells):
+            return out.reshape(unknown.shape)
+        r = flat[cells].astype(np.float64)
+        e, a = np.divmod(cells, self._n_az)
+        el = np.radians(e * self.cfg.cell_deg - 90.0)  # the cell's lower edge
+        az = np.radians((a + 0.5) * self.cfg.cell_deg - 180.0)
+        low = np.column_stack(
+            [r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)]
+        )
+        band = _GROUND_BAND_M + r * np.tan(np.radians(self.cfg.cell_deg))  # as hidden_below's
+        with np.errstate(invalid="ignore"):
+            lifted = -self.ground.depth_below(low) > band
+        cells, r = cells[lifted], r[lifted]
+        onset, hits = self._onsets_at(cells, r.astype(np.float32))
+        came = (onset != NO_ONSET) & (hits >= max(self.cfg.recurrent_bins, 1))
+        out[cells[came]] = True
+        return out.reshape(unknown.shape)
 
     def advance(self, stamp_ns: int) -> None:
         """Move the clock to ``stamp_ns``: a bin that ended before it is finished first."""
@@ -661,8 +722,13 @@ class BackgroundModel:
         static = pool_groups(kth.reshape(self._n_el, self._n_az), groups)
         self.floating_cells = 0
         if cfg.floating_max_size_m > 0:
+            unknown = self._unknown()
             floating = _floating_blobs(
-                static, float(cfg.cell_deg), float(cfg.floating_max_size_m), self._unknown()
+                static,
+                float(cfg.cell_deg),
+                float(cfg.floating_max_size_m),
+                unknown,
+                self._arrived(static, unknown),
             )
             self.floating_cells = int(floating.sum())
             if self.floating_cells:
