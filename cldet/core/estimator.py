@@ -67,7 +67,10 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    ``tracking.causal_line_every_s`` over the last ``tracking.causal_line_window_s``
    (``_search_lines``): a line seen lately whose evidence reaches ``causal_confirm`` is
    followed along its fit, as a lost straight track is, whatever a lost chain's evidence (a
-   line is a coast, not a chosen track).
+   line is a coast, not a chosen track). From then on the line is the lost chain, where
+   there was none, where it outweighs it, or where it continues it (carrying its evidence
+   on): a track that turns up while the pass is out of reach must outweigh it, as it would a
+   lost track's.
    A sparse fast pass, one return in a few scans, never makes a Kalman track to follow.
 
 ``refine``: the candidate tracks plus the constant-velocity lines of sparse fast movers
@@ -1094,21 +1097,23 @@ class TrackEstimator:
         lost track's last detection before the track's first, within ``link_max_gap_s``, the
         jump (``link_jump``: from where it was, or from where its motion carried it; a fast
         pass reappears farther on) is at most ``link_reach``."""
-        lost, ev = self._lost, self._evidence.get(track_id)
-        if lost is None or ev is None:
+        ev = self._evidence.get(track_id)
+        return ev is not None and self._extends(ev.first_t_s, ev.first_position)
+
+    def _extends(self, first_t_s: float, first_position: NDArray[np.float64]) -> bool:
+        """Something first seen at ``first_position`` at ``first_t_s`` can continue the lost
+        chain (``_continues``)."""
+        lost = self._lost
+        if lost is None:
             return False
-        k = int(np.searchsorted(lost.times_s, ev.first_t_s, side="left")) - 1
+        k = int(np.searchsorted(lost.times_s, first_t_s, side="left")) - 1
         if k < 0:
             return False
         tc = self.config.tracking
-        gap = ev.first_t_s - float(lost.times_s[k])
+        gap = first_t_s - float(lost.times_s[k])
         part = slice(k, k + 1)
         jump = link_jump(
-            lost.times_s[part],
-            lost.positions[part],
-            lost.velocity[part],
-            ev.first_t_s,
-            ev.first_position,
+            lost.times_s[part], lost.positions[part], lost.velocity[part], first_t_s, first_position
         )
         return gap <= tc.link_max_gap_s and float(jump[0]) <= float(link_reach(gap, tc))
 
@@ -1210,7 +1215,9 @@ class TrackEstimator:
         (``cldet.core.lines``) over the last ``causal_line_window_s``; the best line whose
         running evidence (scored as the refinement scores tracks) reaches ``causal_confirm``,
         and that was seen within the last ``line_seed_s``, becomes the coast: its fitted line
-        carried on (held as a straight transit where it is one)."""
+        carried on (held as a straight transit where it is one); and the lost chain
+        (``causal_keep_lost``) where there was none, where it outweighs it, or where it
+        continues it (``_extends``: the chain's evidence carried on)."""
         tc = self.config.tracking
         t_now = float(self._times[index])
         if tc.causal_line_every_s <= 0 or t_now - self._line_t < tc.causal_line_every_s:
@@ -1242,6 +1249,17 @@ class TrackEstimator:
             t, z, at_end[None, :], v[None, :], self._scan_s(index), self.config.smoothing
         )[-1]
         self._coast = _Coast(float(t[-1]), origin, velocity, hold_s, tc.line_tol_m)
+        lost = self._lost
+        if tc.causal_keep_lost and (
+            lost is None
+            or line.score > lost.score
+            or self._extends(float(line.times_s[0]), line.positions[0])
+        ):
+            # the line followed is a chain as a lost track's is: its evidence keeps competing
+            # (a line that continues the lost chain carries that chain's on)
+            base = lost.score if lost is not None else 0.0
+            velocity_at = windowed_velocity(line.times_s, z, tc.link_velocity_s)
+            self._lost = _Lost(max(base, line.score), line.times_s.copy(), z, velocity_at)
 
     def _coast_estimate(self, c: _Coast, stamp_ns: int, index: int) -> Estimate:
         """The estimate at a frame from a coast: its origin carried on at its velocity, held
