@@ -52,16 +52,27 @@ def _far_speckle(rng: np.random.Generator, n: int) -> NDArray[np.float64]:
     )
 
 
-def _sparse_pass_frames(seed: int) -> tuple[list[LidarFrame], NDArray[np.float64]]:
-    """The scan of the test scene with lone far speckle every scan and, in about one scan out
-    of five, one Mid-360 return from the pass (a far small drone); and the pass at the stamps."""
+def _sparse_pass_frames(
+    seed: int,
+    seen: float = 0.2,
+    until: int = N_FRAMES,
+    walker_from: int | None = None,
+    n_rays: int = 3000,
+) -> tuple[list[LidarFrame], NDArray[np.float64]]:
+    """The scan of the test scene with lone far speckle every scan and, in about ``seen`` of
+    the scans before ``until``, one Mid-360 return from the pass (a far small drone); and the
+    pass at the stamps. From scan ``walker_from`` on, a person walks 1 m/s 6 m away, 1.15 m
+    above the ground (a detection there weighs about a third of one from the air)."""
     rng = np.random.default_rng(seed)
     stamps = np.arange(N_FRAMES, dtype=np.float64) * PERIOD_S
     frames = []
     empty = np.zeros((0, 3), np.float32)
-    for t in stamps:
-        cloud = [scan(rng, n_rays=3000), _far_speckle(rng, 4).astype(np.float32)]
-        if rng.random() < 0.2:
+    for k, t in enumerate(stamps):
+        walker: list[Sphere] = []
+        if walker_from is not None and k >= walker_from:
+            walker = [((6.0, -4.0 + 1.0 * t, 0.15), 0.35)]
+        cloud = [scan(rng, walker, n_rays=n_rays), _far_speckle(rng, 4).astype(np.float32)]
+        if k < until and rng.random() < seen:
             # taken somewhere inside the 100 ms scan that starts at the stamp
             cloud.append(
                 _pass(np.array([t + rng.uniform(0.0, 0.1)], dtype=np.float64)).astype(np.float32)
@@ -184,31 +195,13 @@ def test_the_causal_estimate_follows_a_sparse_fast_pass_with_the_line_search(see
     assert len(reported(0.0)) < len(found)  # the search is needed here
 
 
-def _pass_then_walker_frames(seed: int) -> tuple[list[LidarFrame], NDArray[np.float64]]:
-    """The sparse pass seen in about half the scans of its first 4 s, then out of reach; from
-    then on a person walks 1 m/s, 6 m away, 1.15 m above the ground (a detection there weighs
-    about a third of one from the air); and the pass at the stamps."""
-    rng = np.random.default_rng(seed)
-    stamps = np.arange(N_FRAMES, dtype=np.float64) * PERIOD_S
-    frames = []
-    empty = np.zeros((0, 3), np.float32)
-    for k, t in enumerate(stamps):
-        walker: Sphere = ((6.0, -4.0 + 1.0 * t, 0.15), 0.35)
-        cloud = [scan(rng, [walker] if k >= 40 else [], n_rays=8000)]
-        cloud.append(_far_speckle(rng, 4).astype(np.float32))
-        if k < 40 and rng.random() < 0.5:
-            cloud.append(_pass(np.array([t + rng.uniform(0.0, 0.1)])).astype(np.float32))
-        frames.append(LidarFrame(int(round(t * 1e9)), np.concatenate(cloud), empty))
-    return frames, _pass(stamps)
-
-
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_a_line_followed_causally_keeps_its_evidence_against_weak_newcomers(seed: int) -> None:
     # the causal estimate follows the pass along the line search's line; once the pass is out
     # of reach, a walker's own evidence reaches causal_confirm after a second, but not the
     # line's: the estimate carries on along the line (held, then slowing), as it would after
     # a lost track (causal_keep_lost); without that the walker takes over, tens of metres off
-    frames, truth = _pass_then_walker_frames(seed)
+    frames, truth = _sparse_pass_frames(seed, seen=0.5, until=40, walker_from=40, n_rays=8000)
 
     def errors(keep_lost: bool) -> NDArray[np.float64]:
         cfg = load_config(overrides={"tracking": {"causal_keep_lost": keep_lost}})
