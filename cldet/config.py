@@ -201,7 +201,8 @@ class BackgroundConfig(BaseModel):
     floating_arrivals: bool = Field(
         default=True,
         description="... also a blob beside the bottom of the field of view, where its surface"
-        " arrived (the sensors had seen through that spot before) and lies clear of the ground:"
+        " arrived (the sensors had seen through that spot before), stayed and lies clear of the"
+        " ground:"
         " a slow drone flying along the field's bottom (a high mount, a tilted sensor), learned"
         " from its own trail; a hedge or the ground far out seen on the lowest row was there"
         " before, or is the ground (false: such a blob never floats, as it may be the visible"

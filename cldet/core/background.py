@@ -55,10 +55,10 @@ ray. The model is a static range image, learned causally (only the past is used)
    see: ``field_bottom_deg``) does not float: no free space is known there, and the ground or
    a hedge seen on the field's lowest row is the visible end of something larger; unless
    (``floating_arrivals``) its cells there arrived (``onsets``: the sensors had seen through
-   the spot before) and their lower edges lie above the ground by more than 0.5 m and a
-   cell's height at that range: those were
-   there before, or are the ground, while a slow drone flying along the field's bottom (a
-   mount high above the ground, a tilted sensor) learns its own trail, which recurs.
+   the spot before), stayed (``recurrent_bins``), and their lower edges lie above the ground
+   by more than 0.5 m plus a cell's height at that range. A hedge or the ground was there
+   before, or is the ground, while a slow drone flying along the field's bottom (a mount
+   high above the ground, a tilted sensor) learns its own trail, which recurs.
 5. Dilation: the static range is replaced by the minimum over the cell and its 8 neighbours
    (azimuth wraps), ``dilate_cells`` times: beam divergence at edges stays background.
 6. A point is background when its range is not shorter than the static range by more than
@@ -614,16 +614,16 @@ class BackgroundModel:
         self, static: NDArray[np.float32], unknown: NDArray[np.bool_]
     ) -> NDArray[np.bool_]:
         """(n_el, n_az) the static cells beside the unknown (``_unknown``) whose surface arrived
-        there (``onsets``: the sensors had seen through that spot before) and stayed (hit in
+        there (``onsets``: the sensors had seen through that spot before), stayed (hit in
         ``recurrent_bins`` bins since: not rain learned while the window holds a few bins), and
-        whose lower edge,
-        at the static range, lies above the ground by more than ``_GROUND_BAND_M`` and the
-        cell's height there (a fit of the ground seen at a grazing angle is that uncertain;
-        the ground is the lower of the plane and the height map: what a drone learned there
-        adds to the map does not count). Such a blob is no visible end of something standing on the ground, as the
-        hedge or the ground far out seen on the field's lowest row is: they were there before,
-        or are the ground; a slow drone flying along the bottom of the field of view, learned
-        from its own trail, is not (the floating rule, step 4, clears it)."""
+        whose lower edge, at the static range, lies above the ground by more than
+        ``_GROUND_BAND_M`` plus the cell's height there (a fit of the ground seen at a grazing
+        angle is that uncertain; the ground is the lower of the plane and the height map, so
+        what a drone learned there adds to the map does not count). Such a blob is not the
+        visible end of something standing on the ground, as a hedge or the ground far out seen
+        on the field's lowest row is (they were there before, or are the ground): a slow drone
+        flying along the bottom of the field of view, learned from its own trail, is cleared by
+        the floating rule (step 4)."""
         out = np.zeros(unknown.size, dtype=np.bool_)
         if not self.cfg.floating_arrivals or not unknown.any() or not self.ground.fitted:
             return out.reshape(unknown.shape)
