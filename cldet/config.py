@@ -485,8 +485,8 @@ class TrackingConfig(BaseModel):
         " first at link_speed plus the lost track's speed there) competes with the chain's"
         " evidence added to its own, any other only once its own exceeds the chain's. A drone"
         " that stopped and was learned, or went behind something, stays a better hypothesis"
-        " than weak clutter that turns up meanwhile; so does the line the causal line search"
-        " follows (causal_line_every_s) once its sightings end (false: any track reaching"
+        " than weak clutter that turns up meanwhile; so does a line from when the causal line"
+        " search (causal_line_every_s) follows it (false: any track reaching"
         " causal_confirm)",
     )
     causal_judge_s: float = Field(

@@ -58,7 +58,9 @@ ray. The model is a static range image, learned causally (only the past is used)
    the spot before), stayed (``recurrent_bins``), and their lower edges lie above the ground
    by more than 0.5 m plus a cell's height at that range. A hedge or the ground was there
    before, or is the ground, while a slow drone flying along the field's bottom (a mount
-   high above the ground, a tilted sensor) learns its own trail, which recurs.
+   high above the ground, a tilted sensor) learns its own trail, which recurs. An arrival
+   is known while the window (6 s) holds the bins before it: one that stops there for longer
+   is learned, unless the estimator protects its track.
 5. Dilation: the static range is replaced by the minimum over the cell and its 8 neighbours
    (azimuth wraps), ``dilate_cells`` times: beam divergence at edges stays background.
 6. A point is background when its range is not shorter than the static range by more than

@@ -68,8 +68,8 @@ returns the *refined* track: the best whole-sequence choice, smoothed and gap-fi
    (``_search_lines``): a line seen lately whose evidence reaches ``causal_confirm`` is
    followed along its fit, as a lost straight track is, whatever a lost chain's evidence (a
    line is a coast, not a chosen track). From then on the line is the lost chain, where
-   there was none, where it outweighs it, or where it continues it (carrying its evidence
-   on): a track that turns up while the pass is out of reach must outweigh it, as it would a
+   there was none, where it outweighs it, or where it continues it (keeping the larger of
+   the two evidences): a track that turns up while the pass is out of reach must outweigh it, as it would a
    lost track's.
    A sparse fast pass, one return in a few scans, never makes a Kalman track to follow.
 
@@ -1217,7 +1217,7 @@ class TrackEstimator:
         and that was seen within the last ``line_seed_s``, becomes the coast: its fitted line
         carried on (held as a straight transit where it is one); and the lost chain
         (``causal_keep_lost``) where there was none, where it outweighs it, or where it
-        continues it (``_extends``: the chain's evidence carried on)."""
+        continues it (``_extends``; the larger of the two evidences kept)."""
         tc = self.config.tracking
         t_now = float(self._times[index])
         if tc.causal_line_every_s <= 0 or t_now - self._line_t < tc.causal_line_every_s:
@@ -1256,10 +1256,9 @@ class TrackEstimator:
             or self._extends(float(line.times_s[0]), line.positions[0])
         ):
             # the line followed is a chain as a lost track's is: its evidence keeps competing
-            # (a line that continues the lost chain carries that chain's on)
+            # (one that continues the lost chain keeps the larger of the two evidences)
             base = lost.score if lost is not None else 0.0
-            velocity_at = windowed_velocity(line.times_s, z, tc.link_velocity_s)
-            self._lost = _Lost(max(base, line.score), line.times_s.copy(), z, velocity_at)
+            self._lost = _Lost(max(base, line.score), line.times_s.copy(), z, line.velocity)
 
     def _coast_estimate(self, c: _Coast, stamp_ns: int, index: int) -> Estimate:
         """The estimate at a frame from a coast: its origin carried on at its velocity, held

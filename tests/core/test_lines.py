@@ -61,8 +61,9 @@ def _sparse_pass_frames(
 ) -> tuple[list[LidarFrame], NDArray[np.float64]]:
     """The scan of the test scene with lone far speckle every scan and, in about ``seen`` of
     the scans before ``until``, one Mid-360 return from the pass (a far small drone); and the
-    pass at the stamps. From scan ``walker_from`` on, a person walks 1 m/s 6 m away, 1.15 m
-    above the ground (a detection there weighs about a third of one from the air)."""
+    pass at the stamps. From scan ``walker_from`` on, a person walks 1 m/s 6 m away, its
+    lowest return 1.3 m above the ground (a detection there weighs about a third of one from
+    the air)."""
     rng = np.random.default_rng(seed)
     stamps = np.arange(N_FRAMES, dtype=np.float64) * PERIOD_S
     frames = []
@@ -195,13 +196,15 @@ def test_the_causal_estimate_follows_a_sparse_fast_pass_with_the_line_search(see
     assert len(reported(0.0)) < len(found)  # the search is needed here
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("seed", [0, 1, 5])
 def test_a_line_followed_causally_keeps_its_evidence_against_weak_newcomers(seed: int) -> None:
-    # the causal estimate follows the pass along the line search's line; once the pass is out
-    # of reach, a walker's own evidence reaches causal_confirm after a second, but not the
-    # line's: the estimate carries on along the line (held, then slowing), as it would after
-    # a lost track (causal_keep_lost); without that the walker takes over, tens of metres off
-    frames, truth = _sparse_pass_frames(seed, seen=0.5, until=40, walker_from=40, n_rays=8000)
+    # the causal estimate follows the pass along the line search's line for 6 s; once the pass
+    # is out of reach, a walker's own evidence reaches causal_confirm after about a second,
+    # but not the line's: the estimate carries on along the line (held, then slowing), as it
+    # would after a lost track (causal_keep_lost); without that the walker takes over, tens of
+    # metres off. On seeds 0-7 the largest error with the rule is under 1 m; before the line
+    # kept its evidence, seeds 0 and 5 failed (the others were held by a lost Kalman track)
+    frames, truth = _sparse_pass_frames(seed, seen=0.6, until=60, walker_from=60, n_rays=8000)
 
     def errors(keep_lost: bool) -> NDArray[np.float64]:
         cfg = load_config(overrides={"tracking": {"causal_keep_lost": keep_lost}})
@@ -211,5 +214,5 @@ def test_a_line_followed_causally_keeps_its_evidence_against_weak_newcomers(seed
         )
 
     kept = errors(True)
-    assert np.all(kept[40:] < 5.0)
-    assert np.median(errors(False)[60:]) > 20.0  # the rule is needed here
+    assert np.all(kept[60:] < 5.0)
+    assert np.median(errors(False)[74:]) > 20.0  # the rule is needed here
