@@ -237,6 +237,13 @@ def _margin(r: float, margin_m: float, margin_fraction: float) -> float:
     return max(margin_m, margin_fraction * r)
 
 
+def _ground_band(r: NDArray[np.floating], cell_deg: float) -> NDArray[np.floating]:
+    """How close to the local ground a static surface at range ``r`` lies when it is the
+    ground: ``_GROUND_BAND_M`` plus the cell's height at that range (a fit of the ground seen
+    at a grazing angle is that uncertain)."""
+    return _GROUND_BAND_M + r * np.tan(np.radians(cell_deg))
+
+
 def _margins(
     r: NDArray[np.floating], margin_m: float, margin_fraction: float
 ) -> NDArray[np.floating]:
@@ -641,7 +648,7 @@ class BackgroundModel:
         low = np.column_stack(
             [r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)]
         )
-        band = _GROUND_BAND_M + r * np.tan(np.radians(self.cfg.cell_deg))  # as hidden_below's
+        band = _ground_band(r, self.cfg.cell_deg)
         with np.errstate(invalid="ignore"):
             lifted = -self.ground.depth_below(low) > band
         cells, r = cells[lifted], r[lifted]
@@ -842,7 +849,7 @@ class BackgroundModel:
             / np.maximum(r, 1e-9)[:, None]
             * np.where(np.isfinite(behind), behind, 0.0)[:, None]
         )
-        band = _GROUND_BAND_M + behind * np.tan(np.radians(self.cfg.cell_deg))
+        band = _ground_band(behind, self.cfg.cell_deg)
         with np.errstate(invalid="ignore"):
             on_ground = self.ground.height_above(surface) < band
         return hidden & np.isfinite(behind) & on_ground
