@@ -646,6 +646,16 @@ class SmoothingConfig(BaseModel):
         " sensors saw through that spot before) came to rest there and was learned as"
         " background: its position is held there, not carried on (with unseen_check_s > 0)",
     )
+    terrain_clearance_m: float = Field(
+        default=2.0,
+        ge=0,
+        description="beyond the detections a track's carried-on path does not pass through the"
+        " ground: it keeps at least the height above the ground (the plane and height map, the"
+        " lower of the two) that it had at that end, up to this much, rising with the ground"
+        " where the motion would run into it (a pass over a slope or a hill climbs with the"
+        " terrain, as it must to fly on). Only as good as the ground: a plane fitted to a roof"
+        " beside the sensor instead of the street lifts the path wrongly (0: off)",
+    )
     ground_stop_m: float = Field(
         default=0.0,
         ge=0,

@@ -83,7 +83,10 @@ the gaps; before the first and after the last detection the track's own motion i
 extrapolated, its velocity decaying with time constant ``extrapolation_tau_s`` (no faster than a
 multirotor brakes: ``max_decel_mps2``), or held still
 where carrying it on contradicts what was not seen, or where the static scene shows it came
-to rest at its end (``_stop_unseen``); the centroid
+to rest at its end (``_stop_unseen``), and kept clear of the ground: a path carried on does
+not pass through it, keeping the height above it that it had at that end, up to
+``terrain_clearance_m`` (``_clear_of_ground``; a pass over a slope climbs with it, and so does
+the causal estimate's coast); the centroid
 bias correction (``cldet.core.bias``) is applied last. Only when no candidate track exists at
 all is the configured fallback position used.
 
@@ -1262,14 +1265,17 @@ class TrackEstimator:
 
     def _coast_estimate(self, c: _Coast, stamp_ns: int, index: int) -> Estimate:
         """The estimate at a frame from a coast: its origin carried on at its velocity, held
-        ``hold_s`` and then decaying as the refinement's extrapolation does."""
+        ``hold_s`` and then decaying, and kept clear of the ground (``_clear_of_ground``), as the
+        refinement's extrapolation does."""
         sc = self.config.smoothing
         dt = float(self._times[index]) - self._offset_s - c.t_s  # to the stamp's time
         tau_s = decay_tau(c.velocity, sc.extrapolation_tau_s, sc.max_decel_mps2)
         pos, var = extrapolate(
             c.origin, c.velocity, np.zeros((2, 2)), dt, sc.accel_psd, tau_s, c.hold_s
         )
-        pos = apply_bias(pos[None, :], self.config.bias)[0]
+        ground = self.background.ground
+        pos = _clear_of_ground(c.origin, pos[None, :], ground, sc.terrain_clearance_m)
+        pos = apply_bias(pos, self.config.bias)[0]
         sigma = float(np.hypot(c.sigma_m, np.sqrt(max(var, 0.0))))
         return Estimate(stamp_ns, pos, Source.PREDICTED, 0, sigma)
 
@@ -1418,6 +1424,9 @@ def refine_candidates(
         pos[f], var[f] = extrapolate(origin, velocity, sm.cov[k_end], dt, q, taus[k_end], hold_s)
     if cand.ground is not None and sc.ground_stop_m > 0:
         _stop_at_ground(pos, first, last, cand.ground, sc.ground_stop_m)
+    if cand.ground is not None:
+        for end, rows in ((first, np.arange(first)), (last, np.arange(last + 1, n))):
+            pos[rows] = _clear_of_ground(pos[end], pos[rows], cand.ground, sc.terrain_clearance_m)
     pos = apply_bias(pos, cfg.bias)
 
     estimates = []
@@ -1563,6 +1572,23 @@ def _stop_at_ground(
             above = np.flatnonzero(depth[: under[0]] <= 0.0)
             k = int(above[-1]) if len(above) else 0
             pos[path[k + 1 :]] = pos[path[k]]
+
+
+def _clear_of_ground(
+    end: NDArray[np.float64], path: NDArray[np.float64], ground: GroundModel, clearance_m: float
+) -> NDArray[np.float64]:
+    """The positions ``path`` (N,3), carried on beyond a track's detections from its end
+    position ``end`` (3,), lifted along the ground's "up" wherever they lie less than the
+    clearance above the ground (``GroundModel.depth_below``) that ``end`` has, capped at
+    ``clearance_m`` (``smoothing.terrain_clearance_m``): a drone flying on cannot pass through
+    the ground, and one seen flying clear of it stays clear. Unchanged before the ground's
+    first fit."""
+    if not ground.fitted or ground.normal is None or clearance_m <= 0 or not len(path):
+        return path
+    above = -float(ground.depth_below(end[None, :])[0])
+    clear = min(max(above, 0.0), clearance_m)
+    lift = np.maximum(ground.depth_below(path) + clear, 0.0)
+    return path + lift[:, None] * np.asarray(ground.normal, dtype=np.float64)[None, :]
 
 
 CLASS_EVERY_S = 1.0

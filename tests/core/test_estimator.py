@@ -1064,7 +1064,9 @@ def test_a_path_carried_back_into_the_ground_stops_where_it_meets_it() -> None:
     stamps = np.arange(n) * 100_000_000
 
     def before(stop_m: float) -> np.ndarray:
-        cfg = _instant_scans({"ground_stop_m": stop_m})
+        # the stop alone: kept above the ground it had (terrain_clearance_m), the path carried
+        # back would also stay clear of it
+        cfg = _instant_scans({"ground_stop_m": stop_m, "terrain_clearance_m": 0.0})
         est = refine_candidates(Candidates([rec], tables, t_s, stamps, None, ground), cfg)
         return np.array([e.position for e in est.estimates])[:30]
 
@@ -1073,6 +1075,38 @@ def test_a_path_carried_back_into_the_ground_stops_where_it_meets_it() -> None:
     stopped = before(1.0)
     assert ground.depth_below(stopped).max() <= 0.0
     assert _rms(stopped - truth[:30]) < 0.5 * _rms(carried - truth[:30])  # 0.30 against 1.51 m
+
+
+def test_a_path_carried_on_over_rising_ground_climbs_with_it() -> None:
+    # a sensor 2 m above ground that rises at 20 % along +y; a drone flies level along +y at
+    # 5 m/s, seen for 3 s, and is 2.1 m above the ground at its last detection. Carried on
+    # level, its path runs into the slope; a drone cannot fly through the ground, and flying
+    # on it climbs with it: kept at the clearance it had (capped at terrain_clearance_m)
+    from cldet.core.estimator import Candidates, refine_candidates
+    from cldet.core.ground import GroundModel
+
+    slope = 0.2
+    up = np.array([0.0, -slope, 1.0]) / np.hypot(1.0, slope)
+    ground = GroundModel(plane=(up, 2.0))
+    n, seen = 60, np.arange(30)
+    t_s = 0.1 * np.arange(n)
+    level = np.stack([np.full(n, 10.0), -10.0 + 5.0 * t_s, np.full(n, 1.0)], axis=1)
+    clearance = 2.0
+    truth = level + np.maximum(ground.depth_below(level) + clearance, 0.0)[:, None] * up
+    assert np.allclose(truth[seen], level[seen])  # level while seen, 2.1-4.9 m up
+    tables, rec = _one_track(n, seen, truth[seen], 5.0)
+    stamps = np.arange(n) * 100_000_000
+
+    def after(clearance_m: float) -> np.ndarray:
+        cfg = _instant_scans({"terrain_clearance_m": clearance_m})
+        est = refine_candidates(Candidates([rec], tables, t_s, stamps, None, ground), cfg)
+        return np.array([e.position for e in est.estimates])[30:]
+
+    level_on = after(0.0)
+    assert ground.depth_below(level_on).max() > 0.5  # through the slope by the end
+    climbed = after(clearance)
+    assert -ground.depth_below(climbed).min() > 1.9
+    assert _rms(climbed - truth[30:]) < 0.1 * _rms(level_on - truth[30:])
 
 
 def test_the_background_warm_up_is_no_evidence_that_a_drone_was_not_there() -> None:
